@@ -1,0 +1,1 @@
+//! Cameras and views: eye, orientation, projection (owned by the renderer work).

@@ -1,0 +1,12 @@
+//! lemi-core: the GPU-free heart of lemi.
+//!
+//! Geometry and math (cells, faces, cameras), layer placement (the error metric of Jeschke & Wimmer),
+//! the image operations of the compression stages and the bundle format. Nothing here touches a GPU,
+//! so its tests are fast and run anywhere.
+
+pub mod camera;
+pub mod compress;
+pub mod placement;
+pub mod scene;
+
+pub use scene::{Aabb, Material, Mesh, Scene, SceneBuilder, SceneStats, Texture, UpAxis, Vertex};

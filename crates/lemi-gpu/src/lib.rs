@@ -1,0 +1,1 @@
+//! lemi-gpu: everything that talks to the GPU through wgpu.
