@@ -1,1 +1,39 @@
-fn main() {}
+//! `lemi`: the command-line front end. Each subcommand lives in its own `cmd_*.rs` file with an
+//! `Args` struct and a `run` function; the libraries do the work.
+
+mod cmd_info;
+mod cmd_layers;
+mod cmd_render;
+
+use clap::{Parser, Subcommand};
+
+/// Layered environment-map impostors for huge static scenes.
+#[derive(Parser)]
+#[command(name = "lemi", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print triangle/material counts, bounds and import statistics of a scene.
+    Info(cmd_info::Args),
+    /// Render a scene from a camera with the GPU reference renderer.
+    Render(cmd_render::Args),
+    /// Compute the layer placement of a view cell (the error metric).
+    Layers(cmd_layers::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Info(a) => cmd_info::run(a),
+        Command::Render(a) => cmd_render::run(a),
+        Command::Layers(a) => cmd_layers::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,8 @@
+//! `lemi info` (not yet wired).
+
+#[derive(clap::Args)]
+pub struct Args {}
+
+pub fn run(_args: Args) -> anyhow::Result<()> {
+    anyhow::bail!("`lemi info` is not available in this build")
+}
