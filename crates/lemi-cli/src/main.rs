@@ -4,6 +4,7 @@
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
+mod load;
 
 use clap::{Parser, Subcommand};
 

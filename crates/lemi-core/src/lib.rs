@@ -5,8 +5,11 @@
 //! so its tests are fast and run anywhere.
 
 pub mod camera;
+pub mod cell;
 pub mod compress;
+pub mod face;
 pub mod placement;
 pub mod scene;
 
+pub use face::Face;
 pub use scene::{Aabb, Material, Mesh, Scene, SceneBuilder, SceneStats, Texture, UpAxis, Vertex};

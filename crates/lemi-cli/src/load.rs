@@ -1,0 +1,63 @@
+//! Shared scene arguments and loading with progress, used by every subcommand that takes `SCENE…`.
+
+use std::time::Instant;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use lemi_core::{Scene, UpAxis};
+
+/// `SCENE…` plus `--up`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene inputs: files (.gltf .glb .obj .ply .ply.gz), directories (searched recursively), or
+    /// built-in scenes `builtin:NAME[:triangles[:seed]]` with NAME one of city, terrain, forest.
+    #[arg(required = true, value_name = "SCENE")]
+    pub scenes: Vec<String>,
+    /// Up axis of the input files; lemi works in +Y up and converts Z-up data at import.
+    #[arg(long, value_enum, default_value = "y")]
+    pub up: UpArg,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum UpArg {
+    Y,
+    Z,
+}
+
+impl From<UpArg> for UpAxis {
+    fn from(u: UpArg) -> Self {
+        match u {
+            UpArg::Y => UpAxis::Y,
+            UpArg::Z => UpAxis::Z,
+        }
+    }
+}
+
+/// Loads the scene, showing a progress bar on stderr when it is a terminal; returns the scene and
+/// the load time in seconds.
+pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new_spinner()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed:>4} {msg} {pos}/{len}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    bar.set_message("loading");
+    let cb_bar = bar.clone();
+    let options = lemi_scene::LoadOptions {
+        up: args.up.into(),
+        progress: Some(std::sync::Arc::new(move |what: &str, done, total| {
+            cb_bar.set_message(what.to_string());
+            cb_bar.set_length(total);
+            cb_bar.set_position(done);
+        })),
+    };
+    let t = Instant::now();
+    let scene = lemi_scene::load(&args.scenes, &options)
+        .with_context(|| format!("loading {}", args.scenes.join(" ")))?;
+    bar.finish_and_clear();
+    Ok((scene, t.elapsed().as_secs_f64()))
+}
