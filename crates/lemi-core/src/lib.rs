@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod cell;
+pub mod clip;
 pub mod compress;
 pub mod face;
 pub mod placement;
