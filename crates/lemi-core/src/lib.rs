@@ -6,8 +6,10 @@
 
 pub mod camera;
 pub mod cell;
+pub mod classify;
 pub mod clip;
 pub mod compress;
+pub mod container;
 pub mod face;
 pub mod placement;
 pub mod scene;
