@@ -5,6 +5,7 @@
 //! so its tests are fast and run anywhere.
 
 pub mod camera;
+pub mod bundle;
 pub mod cell;
 pub mod classify;
 pub mod clip;

@@ -1,0 +1,371 @@
+//! The bundle: everything baked for a scene (`docs/FORMAT.md`). A directory holding
+//! `manifest.json` and `cells/<id>.lemicell`, one checksummed container file per view cell.
+//!
+//! These types are the file format, deliberately independent of the in-memory types of the stages
+//! that produce them, so the format changes only on purpose (bump [`BUNDLE_VERSION`]).
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::cell::{CellGrid, ViewCell};
+use crate::container::{self, Blob, ContainerError};
+use crate::Face;
+
+/// Version of the manifest and cell files. Readers reject any other version.
+pub const BUNDLE_VERSION: u32 = 1;
+/// Magic bytes of a cell file.
+pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
+/// `format` field of the manifest.
+pub const MANIFEST_FORMAT: &str = "lemi-bundle";
+
+/// How the number of layers is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LayerTarget {
+    /// A fixed number of layers per face; the near-field distance follows.
+    Layers(u32),
+    /// A near-field distance (from the cell centre); the fewest layers that reach it.
+    NearField(f64),
+}
+
+/// Every parameter that changes what a cell contains. Two bakes with equal parameters and scene
+/// fingerprint produce interchangeable cells (this is what resuming and merging check).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BakeParams {
+    pub cell_size: f64,
+    /// Texels per face side (`Res`).
+    pub resolution: u32,
+    pub target: LayerTarget,
+    /// Baked faces in lemi's order.
+    pub faces: Vec<Face>,
+    /// Allowed parallax angle in radians.
+    pub alpha: f64,
+    /// The output view α was derived from (for evaluation), if any.
+    pub output_fov_deg: Option<f64>,
+    pub output_width: Option<u32>,
+    /// Micro-texture grid cell size in texels (GI 2002 sec. 5.3).
+    pub micro_grid: u32,
+    /// Minimum opaque fraction while growing a micro-texture.
+    pub micro_threshold: f64,
+}
+
+impl BakeParams {
+    /// A stable hash of the parameters (hex BLAKE3 of their canonical JSON).
+    pub fn hash(&self) -> String {
+        let json = serde_json::to_vec(self).unwrap_or_default();
+        blake3::hash(&json).to_hex().to_string()
+    }
+}
+
+/// What scene a bundle was baked from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneRef {
+    /// Inputs as given (`builtin:…` specs or paths).
+    pub sources: Vec<String>,
+    /// `"y"` or `"z"`.
+    pub up: String,
+    /// Hex BLAKE3 over the sources' contents (see `lemi_scene::fingerprint`).
+    pub fingerprint: String,
+    pub triangles: u64,
+}
+
+/// One baked cell in the manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CellEntry {
+    pub id: String,
+    /// Path relative to the bundle directory.
+    pub file: String,
+    pub bytes: u64,
+    /// Hex BLAKE3 of the whole cell file.
+    pub blake3: String,
+}
+
+/// `manifest.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub version: u32,
+    pub generator: String,
+    pub scene: SceneRef,
+    pub params: BakeParams,
+    pub params_hash: String,
+    pub grid: CellGrid,
+    pub cells: Vec<CellEntry>,
+}
+
+/// One layer of one face as baked.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LayerInfo {
+    pub distance: f64,
+    pub near_border: f64,
+    /// `f64::MAX` stands for infinity (the farthest layer; JSON has no ∞).
+    pub far_border: f64,
+}
+
+/// A textured quad of the far field: a micro-texture placed in 3D.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Quad {
+    pub face: Face,
+    /// Layer index, far to near.
+    pub layer: u16,
+    /// Corners in world space, in the order (s0,t0), (s1,t0), (s1,t1), (s0,t1) of the face image.
+    pub corners: [[f32; 3]; 4],
+    /// Index into [`CellHeader::macros`].
+    pub macro_index: u32,
+    /// Texel rectangle `[x, y, w, h]` in the macro-texture, as stored (after rotation).
+    pub rect: [u32; 4],
+    /// Stored rotated by 90° (GI 2002 sec. 5.4: tall micro-textures are turned to lie flat).
+    pub rotated: bool,
+}
+
+/// A macro-texture: stored as a PNG blob named `name`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MacroInfo {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Numbers that describe a baked cell (GI 2002 Table 2 and more).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CellStats {
+    pub far_triangles: u64,
+    pub near_triangles: u64,
+    pub submitted_triangles: u64,
+    pub raw_bytes: u64,
+    pub opaque_texels_recorded: u64,
+    pub opaque_texels_after_gap_fill: u64,
+    pub opaque_texels_after_hidden_removal: u64,
+    pub micro_textures: u64,
+    pub micro_fill_ratio: f64,
+    pub macro_textures: u64,
+    pub macro_bytes: u64,
+    pub png_bytes: u64,
+    /// Seconds per stage, by name.
+    pub seconds: Vec<(String, f64)>,
+}
+
+/// The JSON header of a cell file. Blobs: `near.bin` (the near list, `(mesh u32, tri u32)` pairs
+/// little-endian) and one PNG per macro-texture.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CellHeader {
+    pub cell: ViewCell,
+    pub params_hash: String,
+    pub scene_fingerprint: String,
+    pub near_field: f64,
+    /// Per baked face (same order as `BakeParams::faces`), its layers far to near.
+    pub layers: Vec<Vec<LayerInfo>>,
+    pub quads: Vec<Quad>,
+    pub macros: Vec<MacroInfo>,
+    pub stats: CellStats,
+}
+
+/// Errors reading or writing a bundle; each names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum BundleError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Container {
+        path: PathBuf,
+        #[source]
+        source: ContainerError,
+    },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+/// Path of the manifest in a bundle directory.
+pub fn manifest_path(bundle: &Path) -> PathBuf {
+    bundle.join("manifest.json")
+}
+
+/// Relative path of a cell file.
+pub fn cell_file_name(id: &str) -> String {
+    format!("cells/{id}.lemicell")
+}
+
+impl Manifest {
+    pub fn read(bundle: &Path) -> Result<Manifest, BundleError> {
+        let path = manifest_path(bundle);
+        let bytes = std::fs::read(&path).map_err(|source| BundleError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| BundleError::Invalid {
+            path: path.clone(),
+            message: format!("not a valid lemi manifest: {e}"),
+        })?;
+        if m.format != MANIFEST_FORMAT {
+            return Err(BundleError::Invalid {
+                path,
+                message: format!("format is `{}`, expected `{MANIFEST_FORMAT}`", m.format),
+            });
+        }
+        if m.version != BUNDLE_VERSION {
+            return Err(BundleError::Invalid {
+                path,
+                message: format!(
+                    "bundle version {} is not supported (this lemi reads version {BUNDLE_VERSION})",
+                    m.version
+                ),
+            });
+        }
+        Ok(m)
+    }
+
+    pub fn write(&self, bundle: &Path) -> Result<(), BundleError> {
+        let path = manifest_path(bundle);
+        let json = serde_json::to_vec_pretty(self).map_err(|e| BundleError::Invalid {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        container::write_atomic(&path, &json).map_err(|source| BundleError::Io { path, source })
+    }
+}
+
+/// A decoded cell file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellFile {
+    pub header: CellHeader,
+    /// `(mesh, triangle)` pairs drawn as geometry.
+    pub near: Vec<[u32; 2]>,
+    /// PNG bytes per macro-texture, in `header.macros` order.
+    pub pngs: Vec<Vec<u8>>,
+}
+
+impl CellFile {
+    pub fn encode(&self) -> Result<Vec<u8>, ContainerError> {
+        let mut blobs = Vec::with_capacity(1 + self.pngs.len());
+        blobs.push(Blob {
+            name: "near.bin".into(),
+            data: bytemuck::cast_slice(&self.near).to_vec(),
+        });
+        for (m, png) in self.header.macros.iter().zip(&self.pngs) {
+            blobs.push(Blob {
+                name: m.name.clone(),
+                data: png.clone(),
+            });
+        }
+        container::encode(CELL_MAGIC, BUNDLE_VERSION, &self.header, &blobs)
+    }
+
+    pub fn decode(bytes: &[u8]) -> Result<CellFile, ContainerError> {
+        let (header, blobs): (CellHeader, Vec<Blob>) =
+            container::decode(CELL_MAGIC, "cell", BUNDLE_VERSION, bytes)?;
+        let mut it = blobs.into_iter();
+        let near_blob = it
+            .next()
+            .filter(|b| b.name == "near.bin" && b.data.len() % 8 == 0)
+            .ok_or_else(|| ContainerError::Header("missing or malformed near.bin".into()))?;
+        let near: Vec<[u32; 2]> = near_blob
+            .data
+            .chunks_exact(8)
+            .map(|c| {
+                [
+                    u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+                    u32::from_le_bytes([c[4], c[5], c[6], c[7]]),
+                ]
+            })
+            .collect();
+        let pngs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
+        if pngs.len() != header.macros.len() {
+            return Err(ContainerError::Header(format!(
+                "{} macro-textures listed but {} stored",
+                header.macros.len(),
+                pngs.len()
+            )));
+        }
+        for q in &header.quads {
+            let ok = (q.macro_index as usize) < header.macros.len()
+                && q.corners.iter().flatten().all(|c| c.is_finite());
+            if !ok {
+                return Err(ContainerError::Header(
+                    "a quad references a missing macro-texture or has non-finite corners".into(),
+                ));
+            }
+        }
+        Ok(CellFile {
+            header,
+            near,
+            pngs,
+        })
+    }
+
+    /// Reads and verifies a cell file.
+    pub fn read(path: &Path) -> Result<CellFile, BundleError> {
+        let bytes = std::fs::read(path).map_err(|source| BundleError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        CellFile::decode(&bytes).map_err(|source| BundleError::Container {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}
+
+/// The reference viewpoint of a cell as f64 (helper for stages that work relative to it).
+pub fn reference_viewpoint(cell: &ViewCell) -> DVec3 {
+    cell.center
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::IVec3;
+
+    pub(crate) fn sample_cell() -> CellFile {
+        CellFile {
+            header: CellHeader {
+                cell: ViewCell {
+                    index: IVec3::new(1, 0, 2),
+                    center: DVec3::new(15.0, 1.7, 25.0),
+                    half: DVec3::splat(5.0),
+                },
+                params_hash: "abc".into(),
+                scene_fingerprint: "def".into(),
+                near_field: 42.0,
+                layers: vec![vec![LayerInfo {
+                    distance: 100.0,
+                    near_border: 50.0,
+                    far_border: f64::MAX,
+                }]],
+                quads: vec![Quad {
+                    face: Face::PosX,
+                    layer: 0,
+                    corners: [[1.0, 2.0, 3.0]; 4],
+                    macro_index: 0,
+                    rect: [0, 0, 8, 8],
+                    rotated: false,
+                }],
+                macros: vec![MacroInfo {
+                    name: "macro0.png".into(),
+                    width: 64,
+                    height: 64,
+                }],
+                stats: CellStats::default(),
+            },
+            near: vec![[0, 1], [2, 3]],
+            pngs: vec![vec![137, 80, 78, 71]],
+        }
+    }
+
+    #[test]
+    fn cell_files_round_trip_and_reject_damage() {
+        let c = sample_cell();
+        let bytes = c.encode().unwrap();
+        assert_eq!(CellFile::decode(&bytes).unwrap(), c);
+        assert!(CellFile::decode(&bytes[..bytes.len() / 2]).is_err());
+        let mut bad = bytes.clone();
+        let n = bad.len();
+        bad[n / 3] ^= 1;
+        assert!(CellFile::decode(&bad).is_err());
+    }
+}
