@@ -6,9 +6,11 @@
 
 pub mod builtin;
 mod error;
+mod fingerprint;
 pub mod import;
 
 pub use error::SceneError;
+pub use fingerprint::fingerprint;
 
 use std::sync::Arc;
 
