@@ -1,0 +1,282 @@
+//! Which cells to bake and where results go: resumable runs, deterministic shards
+//! (`--shard K/N`, for Kubernetes Indexed Jobs or Slurm arrays) and the merge step that writes the
+//! manifest from the shards' records. Every file is written atomically.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use lemi_core::bundle::{
+    cell_file_name, BakeParams, BundleError, CellEntry, CellFile, Manifest, SceneRef,
+    BUNDLE_VERSION, MANIFEST_FORMAT,
+};
+use lemi_core::cell::{CellGrid, Shard, ViewCell};
+use lemi_core::container::write_atomic;
+use serde::{Deserialize, Serialize};
+
+/// Errors of the bake job; each names the file or parameter at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error(transparent)]
+    Bundle(#[from] BundleError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{0}")]
+    Invalid(String),
+    #[error("cell {cell}: {message}")]
+    Cell { cell: String, message: String },
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BakeError + '_ {
+    move |source| BakeError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// What to bake and where.
+#[derive(Clone, Debug)]
+pub struct BakeJob {
+    pub bundle: PathBuf,
+    pub scene: SceneRef,
+    pub params: BakeParams,
+    pub grid: CellGrid,
+    /// Cells of the bundle (all of the grid, or the explicit `--cells` list).
+    pub cells: Vec<ViewCell>,
+    /// This run's share of `cells`, if sharded; a sharded run records its cells in
+    /// `shards/K-of-N.json` and leaves the manifest to [`merge`].
+    pub shard: Option<Shard>,
+}
+
+/// A shard's record of what it baked (`shards/K-of-N.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShardRecord {
+    pub shard: Shard,
+    pub scene: SceneRef,
+    pub params: BakeParams,
+    pub params_hash: String,
+    pub grid: CellGrid,
+    /// Every cell of the bundle (so merge knows the full list).
+    pub all_cells: Vec<String>,
+    pub cells: Vec<CellEntry>,
+}
+
+/// What happened to one cell.
+#[derive(Clone, Debug)]
+pub enum CellOutcome {
+    Baked { entry: CellEntry, file: Box<CellFile>, seconds: f64 },
+    Skipped { entry: CellEntry },
+}
+
+/// The result of [`run`].
+#[derive(Clone, Debug, Default)]
+pub struct RunSummary {
+    pub outcomes: Vec<CellOutcome>,
+    pub seconds: f64,
+    /// Where the manifest (or, for a shard, the shard record) went.
+    pub record: PathBuf,
+}
+
+fn entry_for(id: &str, bytes: &[u8]) -> CellEntry {
+    CellEntry {
+        id: id.to_string(),
+        file: cell_file_name(id),
+        bytes: bytes.len() as u64,
+        blake3: blake3::hash(bytes).to_hex().to_string(),
+    }
+}
+
+/// Checks a cell file already on disk: returns its entry if it is intact and was baked from the same
+/// scene with the same parameters (then a resumed bake skips it).
+fn existing(bundle: &Path, cell: &ViewCell, job: &BakeJob, hash: &str) -> Option<CellEntry> {
+    let id = cell.id();
+    let path = bundle.join(cell_file_name(&id));
+    let bytes = std::fs::read(&path).ok()?;
+    let file = CellFile::decode(&bytes).ok()?;
+    let same = file.header.params_hash == hash
+        && file.header.scene_fingerprint == job.scene.fingerprint
+        && file.header.cell.index == cell.index;
+    same.then(|| entry_for(&id, &bytes))
+}
+
+/// Bakes the job's cells with `bake_cell`, skipping intact cells of an earlier identical run,
+/// writing each cell file atomically as soon as it is done, and finally the manifest (or, for a
+/// shard, its record). `on_cell` is told about every cell as it finishes (for progress).
+pub fn run(
+    job: &BakeJob,
+    mut bake_cell: impl FnMut(&ViewCell) -> Result<CellFile, BakeError>,
+    mut on_cell: impl FnMut(usize, usize, &CellOutcome),
+) -> Result<RunSummary, BakeError> {
+    let t0 = Instant::now();
+    let hash = job.params.hash();
+    let cells_dir = job.bundle.join("cells");
+    std::fs::create_dir_all(&cells_dir).map_err(io(&cells_dir))?;
+    let mine: Vec<ViewCell> = match job.shard {
+        Some(s) => s.select(&job.cells),
+        None => job.cells.clone(),
+    };
+    let mut outcomes = Vec::with_capacity(mine.len());
+    for (i, cell) in mine.iter().enumerate() {
+        let outcome = if let Some(entry) = existing(&job.bundle, cell, job, &hash) {
+            CellOutcome::Skipped { entry }
+        } else {
+            let t = Instant::now();
+            let mut file = bake_cell(cell)?;
+            file.header.params_hash = hash.clone();
+            file.header.scene_fingerprint = job.scene.fingerprint.clone();
+            let bytes = file.encode().map_err(|e| BakeError::Cell {
+                cell: cell.id(),
+                message: e.to_string(),
+            })?;
+            let path = job.bundle.join(cell_file_name(&cell.id()));
+            write_atomic(&path, &bytes).map_err(io(&path))?;
+            CellOutcome::Baked {
+                entry: entry_for(&cell.id(), &bytes),
+                file: Box::new(file),
+                seconds: t.elapsed().as_secs_f64(),
+            }
+        };
+        on_cell(i, mine.len(), &outcome);
+        outcomes.push(outcome);
+    }
+    let entries: Vec<CellEntry> = outcomes
+        .iter()
+        .map(|o| match o {
+            CellOutcome::Baked { entry, .. } | CellOutcome::Skipped { entry } => entry.clone(),
+        })
+        .collect();
+    let record = match job.shard {
+        None => {
+            let manifest = Manifest {
+                format: MANIFEST_FORMAT.into(),
+                version: BUNDLE_VERSION,
+                generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
+                scene: job.scene.clone(),
+                params: job.params.clone(),
+                params_hash: hash,
+                grid: job.grid.clone(),
+                cells: entries,
+            };
+            manifest.write(&job.bundle)?;
+            lemi_core::bundle::manifest_path(&job.bundle)
+        }
+        Some(s) => {
+            let rec = ShardRecord {
+                shard: s,
+                scene: job.scene.clone(),
+                params: job.params.clone(),
+                params_hash: hash,
+                grid: job.grid.clone(),
+                all_cells: job.cells.iter().map(|c| c.id()).collect(),
+                cells: entries,
+            };
+            let dir = job.bundle.join("shards");
+            std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+            let path = dir.join(format!("{}-of-{}.json", s.k, s.n));
+            let json = serde_json::to_vec_pretty(&rec)
+                .map_err(|e| BakeError::Invalid(format!("{}: {e}", path.display())))?;
+            write_atomic(&path, &json).map_err(io(&path))?;
+            path
+        }
+    };
+    Ok(RunSummary {
+        outcomes,
+        seconds: t0.elapsed().as_secs_f64(),
+        record,
+    })
+}
+
+/// `lemi bake --merge BUNDLE`: reads every shard record, checks that they agree (scene, parameters,
+/// grid, shard count) and that every shard is present, verifies every cell file against its
+/// recorded hash, and writes the manifest. The result equals the manifest of a single run.
+pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
+    let dir = bundle.join("shards");
+    let rd = std::fs::read_dir(&dir).map_err(io(&dir))?;
+    let mut records: Vec<(PathBuf, ShardRecord)> = Vec::new();
+    for e in rd {
+        let e = e.map_err(io(&dir))?;
+        let p = e.path();
+        if p.extension().and_then(|x| x.to_str()) != Some("json") {
+            continue;
+        }
+        let bytes = std::fs::read(&p).map_err(io(&p))?;
+        let rec: ShardRecord = serde_json::from_slice(&bytes).map_err(|err| {
+            BakeError::Invalid(format!("{}: not a lemi shard record: {err}", p.display()))
+        })?;
+        records.push((p, rec));
+    }
+    let Some((first_path, first)) = records.first().cloned() else {
+        return Err(BakeError::Invalid(format!(
+            "{}: no shard records (*.json) to merge",
+            dir.display()
+        )));
+    };
+    let n = first.shard.n;
+    let mut seen = vec![false; n as usize];
+    for (p, r) in &records {
+        let same = r.params_hash == first.params_hash
+            && r.scene.fingerprint == first.scene.fingerprint
+            && r.grid == first.grid
+            && r.all_cells == first.all_cells
+            && r.shard.n == n;
+        if !same {
+            return Err(BakeError::Invalid(format!(
+                "{} disagrees with {} (scene, parameters, cells or shard count differ)",
+                p.display(),
+                first_path.display()
+            )));
+        }
+        if let Some(s) = seen.get_mut(r.shard.k as usize) {
+            *s = true;
+        }
+    }
+    let missing: Vec<String> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| !**s)
+        .map(|(k, _)| format!("{k}/{n}"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(BakeError::Invalid(format!(
+            "{}: shards {} have not been baked yet",
+            dir.display(),
+            missing.join(", ")
+        )));
+    }
+    let mut by_id = std::collections::HashMap::new();
+    for (_, r) in &records {
+        for c in &r.cells {
+            by_id.insert(c.id.clone(), c.clone());
+        }
+    }
+    let mut cells = Vec::with_capacity(first.all_cells.len());
+    for id in &first.all_cells {
+        let entry = by_id
+            .get(id)
+            .ok_or_else(|| BakeError::Invalid(format!("cell {id} is in no shard record")))?;
+        let path = bundle.join(&entry.file);
+        let bytes = std::fs::read(&path).map_err(io(&path))?;
+        if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
+            return Err(BakeError::Invalid(format!(
+                "{}: does not match its shard record (changed after baking)",
+                path.display()
+            )));
+        }
+        cells.push(entry.clone());
+    }
+    let manifest = Manifest {
+        format: MANIFEST_FORMAT.into(),
+        version: BUNDLE_VERSION,
+        generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
+        scene: first.scene.clone(),
+        params: first.params.clone(),
+        params_hash: first.params_hash.clone(),
+        grid: first.grid.clone(),
+        cells,
+    };
+    manifest.write(bundle)?;
+    Ok(manifest)
+}
