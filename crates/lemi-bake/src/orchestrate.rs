@@ -67,8 +67,14 @@ pub struct ShardRecord {
 /// What happened to one cell.
 #[derive(Clone, Debug)]
 pub enum CellOutcome {
-    Baked { entry: CellEntry, file: Box<CellFile>, seconds: f64 },
-    Skipped { entry: CellEntry },
+    Baked {
+        entry: CellEntry,
+        file: Box<CellFile>,
+        seconds: f64,
+    },
+    Skipped {
+        entry: CellEntry,
+    },
 }
 
 /// The result of [`run`].

@@ -58,10 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "bounds     min ({:.3}, {:.3}, {:.3})  max ({:.3}, {:.3}, {:.3})",
         b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z
     );
-    println!(
-        "size       {:.3} x {:.3} x {:.3} m",
-        size.x, size.y, size.z
-    );
+    println!("size       {:.3} x {:.3} x {:.3} m", size.x, size.y, size.z);
     println!(
         "dropped    {} non-finite, {} degenerate (zero area), {} bad index",
         s.dropped_nonfinite, s.dropped_degenerate, s.dropped_bad_index

@@ -1,8 +1,323 @@
-//! `lemi render` (not yet wired).
+//! `lemi render SCENE… --eye x,y,z --look x,y,z --fov 60 --size 1280x720 -o out.png`: renders a
+//! scene with the GPU reference renderer (`lemi-gpu`) and writes the image, optionally the depth.
+//!
+//! Camera coordinates are lemi's world (+Y up, after any `--up z` conversion of the input), the same
+//! coordinates `lemi info` prints. The view direction is `--look` (a point), `--dir` (a vector) or
+//! `--yaw/--pitch` (degrees; yaw 0 looks along −Z, 90 along +X); with none of them the camera looks
+//! at the centre of the scene, and without `--eye` it is placed to frame the whole scene.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context};
+use glam::DVec3;
+use lemi_core::camera::Camera;
+use lemi_gpu::{BackendChoice, Frame, Gpu, GpuScene, RenderOptions, Renderer, UploadOptions};
+use serde_json::json;
+
+use crate::load::{load_scene, SceneArgs};
 
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Eye position `x,y,z` (metres). Default: framing the whole scene from above and in front.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub eye: Option<DVec3>,
+    /// Point to look at, `x,y,z`. Default: the centre of the scene.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, conflicts_with_all = ["dir", "yaw", "pitch"])]
+    pub look: Option<DVec3>,
+    /// View direction `x,y,z` instead of --look.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, conflicts_with_all = ["yaw", "pitch"])]
+    pub dir: Option<DVec3>,
+    /// Heading in degrees instead of --look (0 looks along −Z, 90 along +X).
+    #[arg(long, allow_hyphen_values = true)]
+    pub yaw: Option<f64>,
+    /// Pitch in degrees with --yaw (positive looks up, within ±90).
+    #[arg(long, allow_hyphen_values = true)]
+    pub pitch: Option<f64>,
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub fov: f64,
+    /// Image size `WIDTHxHEIGHT`.
+    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    pub size: (u32, u32),
+    /// Near-plane distance in metres (the far plane is at infinity).
+    #[arg(long, default_value_t = lemi_core::camera::DEFAULT_NEAR)]
+    pub near: f64,
+    /// Output image (.png; .jpg drops alpha).
+    #[arg(short = 'o', long = "output")]
+    pub output: PathBuf,
+    /// Also write the depth (distance along the view axis): `.pfm` stores exact f32 metres
+    /// (background +inf), `.png` a 16-bit grey image scaled from the nearest (white) to the
+    /// farthest (black) drawn depth, background 0.
+    #[arg(long)]
+    pub depth: Option<PathBuf>,
+    /// GPU backend: auto (WGPU_BACKEND if set, else Vulkan then GL), vulkan or gl.
+    #[arg(long, default_value = "auto")]
+    pub backend: String,
+    /// Background colour `r,g,b,a` (sRGB bytes).
+    #[arg(long, value_parser = parse_rgba, default_value = "0,0,0,0")]
+    pub clear: [u8; 4],
+    /// Render this many frames and report the median render time (for benchmarks; the image is
+    /// the same every time).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub frames: u32,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`lemi render` is not available in this build")
+fn parse_numbers(s: &str, n: usize) -> Result<Vec<f64>, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}"))?;
+    if v.len() != n || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "`{s}`: expected {n} finite comma-separated numbers"
+        ));
+    }
+    Ok(v)
+}
+
+fn parse_vec3(s: &str) -> Result<DVec3, String> {
+    let v = parse_numbers(s, 3)?;
+    Ok(DVec3::new(v[0], v[1], v[2]))
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}`: height: {e}"))?;
+    if w == 0 || h == 0 {
+        return Err(format!("`{s}`: width and height must be at least 1"));
+    }
+    Ok((w, h))
+}
+
+fn parse_rgba(s: &str) -> Result<[u8; 4], String> {
+    let v: Vec<u8> = s
+        .split(',')
+        .map(|p| p.trim().parse::<u8>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e} (expected r,g,b,a bytes)"))?;
+    v.try_into()
+        .map_err(|_| format!("`{s}`: expected four comma-separated bytes r,g,b,a"))
+}
+
+/// The camera from the flags, with defaults taken from the scene bounds.
+fn camera(args: &Args, bounds: &lemi_core::Aabb) -> anyhow::Result<Camera> {
+    let (w, h) = args.size;
+    let (center, radius) = if bounds.is_empty() {
+        (DVec3::ZERO, 1.0)
+    } else {
+        (bounds.center(), (0.5 * bounds.size().length()).max(1e-3))
+    };
+    let eye = match args.eye {
+        Some(e) => e,
+        None => {
+            // Far enough that the bounding sphere fits the vertical field of view.
+            let dist = radius / (0.5 * args.fov.clamp(1.0, 179.0).to_radians()).sin();
+            center + DVec3::new(0.0, 0.45, 1.0).normalize() * dist
+        }
+    };
+    let cam = if args.yaw.is_some() || args.pitch.is_some() {
+        Camera::from_yaw_pitch(
+            eye,
+            args.yaw.unwrap_or(0.0),
+            args.pitch.unwrap_or(0.0),
+            args.fov,
+            w,
+            h,
+        )
+        .context("--yaw/--pitch/--fov/--size")?
+    } else if let Some(d) = args.dir {
+        Camera::new(eye, d, DVec3::Y, args.fov, w, h).context("--dir/--eye/--fov/--size")?
+    } else {
+        let target = args.look.unwrap_or(center);
+        Camera::look_at(eye, target, DVec3::Y, args.fov, w, h)
+            .context("--look/--eye/--fov/--size")?
+    };
+    cam.with_near(args.near).context("--near")
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    if let Some(d) = &args.depth {
+        depth_kind(d)?;
+    }
+    let (scene, load_seconds) = load_scene(&args.scene, args.json)?;
+    let cam = camera(&args, &scene.bounds)?;
+    let gpu = Gpu::new(backend)?;
+    let t = Instant::now();
+    let gpu_scene = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
+        .context("uploading the scene to the GPU")?;
+    let upload_seconds = t.elapsed().as_secs_f64();
+    let renderer = Renderer::new(&gpu)?;
+    let options = RenderOptions {
+        clear: args.clear,
+        ..Default::default()
+    };
+    let view = cam.view();
+    let mut times = Vec::new();
+    let mut frame = None;
+    for _ in 0..args.frames {
+        let t = Instant::now();
+        frame = Some(
+            renderer
+                .render(&gpu_scene, &view, &options)
+                .context("rendering")?,
+        );
+        times.push(t.elapsed().as_secs_f64());
+    }
+    let frame = frame.context("no frame rendered")?;
+    times.sort_by(f64::total_cmp);
+    let render_seconds = times[times.len() / 2];
+    save_rgba(&frame, &args.output)?;
+    if let Some(d) = &args.depth {
+        save_depth(&frame, d)?;
+    }
+    if args.json {
+        let out = json!({
+            "output": args.output,
+            "depth": args.depth,
+            "adapter": gpu.info().name,
+            "backend": format!("{:?}", gpu.info().backend),
+            "triangles": scene.triangle_count(),
+            "chunks": gpu_scene.geometry.chunks().len(),
+            "width": frame.width,
+            "height": frame.height,
+            "eye": cam.eye.to_array(),
+            "forward": cam.forward.to_array(),
+            "fov_y_deg": cam.fov_y_deg,
+            "covered_pixels": frame.covered_count(),
+            "load_seconds": load_seconds,
+            "upload_seconds": upload_seconds,
+            "render_seconds": render_seconds,
+            "frames": args.frames,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("adapter    {}", gpu.describe());
+    println!(
+        "scene      {} triangles in {} GPU chunks",
+        scene.triangle_count(),
+        gpu_scene.geometry.chunks().len()
+    );
+    println!(
+        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {}°  {}x{}",
+        cam.eye.x,
+        cam.eye.y,
+        cam.eye.z,
+        cam.forward.x,
+        cam.forward.y,
+        cam.forward.z,
+        cam.fov_y_deg,
+        cam.width,
+        cam.height
+    );
+    println!(
+        "covered    {} of {} pixels",
+        frame.covered_count(),
+        frame.width as u64 * frame.height as u64
+    );
+    println!(
+        "time       load {load_seconds:.2} s, upload {upload_seconds:.2} s, render {render_seconds:.3} s{}",
+        if args.frames > 1 {
+            format!(" (median of {} frames)", args.frames)
+        } else {
+            String::new()
+        }
+    );
+    println!("wrote      {}", args.output.display());
+    if let Some(d) = &args.depth {
+        println!("wrote      {}", d.display());
+    }
+    Ok(())
+}
+
+fn save_rgba(frame: &Frame, path: &Path) -> anyhow::Result<()> {
+    let img = image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba.clone())
+        .context("rendered image has the wrong size")?;
+    let ext = extension(path);
+    let result = if ext == "jpg" || ext == "jpeg" {
+        image::DynamicImage::ImageRgba8(img).to_rgb8().save(path)
+    } else {
+        img.save(path)
+    };
+    result.with_context(|| format!("writing {} (-o)", path.display()))
+}
+
+fn extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}
+
+#[derive(PartialEq)]
+enum DepthKind {
+    Pfm,
+    Png,
+}
+
+fn depth_kind(path: &Path) -> anyhow::Result<DepthKind> {
+    match extension(path).as_str() {
+        "pfm" => Ok(DepthKind::Pfm),
+        "png" => Ok(DepthKind::Png),
+        other => bail!(
+            "--depth {}: unsupported extension `{other}`; use .pfm (exact f32 metres) or .png \
+             (16-bit, scaled)",
+            path.display()
+        ),
+    }
+}
+
+fn save_depth(frame: &Frame, path: &Path) -> anyhow::Result<()> {
+    let bytes = match depth_kind(path)? {
+        DepthKind::Pfm => {
+            // Portable float map: greyscale "Pf", little-endian (negative scale), rows bottom-up.
+            let mut out = format!("Pf\n{} {}\n-1.0\n", frame.width, frame.height).into_bytes();
+            for row in frame.depth.chunks(frame.width as usize).rev() {
+                for d in row {
+                    out.extend_from_slice(&d.to_le_bytes());
+                }
+            }
+            std::fs::write(path, out)
+        }
+        DepthKind::Png => {
+            let finite = frame.depth.iter().copied().filter(|d| d.is_finite());
+            let (lo, hi) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), d| {
+                (a.min(d), b.max(d))
+            });
+            let span = (hi - lo).max(1e-12);
+            let grey: Vec<u16> = frame
+                .depth
+                .iter()
+                .map(|&d| {
+                    if d.is_finite() {
+                        // nearest white (65535) … farthest 1, background 0
+                        1 + ((1.0 - (d - lo) / span) * 65534.0).round() as u16
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            let img: image::ImageBuffer<image::Luma<u16>, Vec<u16>> =
+                image::ImageBuffer::from_raw(frame.width, frame.height, grey)
+                    .context("depth image has the wrong size")?;
+            return img
+                .save(path)
+                .with_context(|| format!("writing {} (--depth)", path.display()));
+        }
+    };
+    bytes.with_context(|| format!("writing {} (--depth)", path.display()))
 }

@@ -291,11 +291,7 @@ impl CellFile {
                 ));
             }
         }
-        Ok(CellFile {
-            header,
-            near,
-            pngs,
-        })
+        Ok(CellFile { header, near, pngs })
     }
 
     /// Reads and verifies a cell file.

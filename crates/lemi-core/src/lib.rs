@@ -4,8 +4,8 @@
 //! the image operations of the compression stages and the bundle format. Nothing here touches a GPU,
 //! so its tests are fast and run anywhere.
 
-pub mod camera;
 pub mod bundle;
+pub mod camera;
 pub mod cell;
 pub mod classify;
 pub mod clip;

@@ -1,1 +1,36 @@
-//! lemi-gpu: everything that talks to the GPU through wgpu.
+//! lemi-gpu: everything that talks to the GPU through wgpu (DESIGN.md, "Rendering: wgpu").
+//!
+//! - [`Gpu`]: adapter and device setup (any wgpu backend; Mesa's lavapipe/llvmpipe without a GPU).
+//! - [`shading`]: the one shading model (WGSL module + CPU mirror) every pipeline shares.
+//! - [`GpuScene`]: materials and chunked geometry on the GPU.
+//! - [`Renderer`]: the reference renderer, the ground truth impostors are compared with.
+//!
+//! ```no_run
+//! use lemi_core::camera::Camera;
+//! use lemi_gpu::{BackendChoice, Gpu, GpuScene, RenderOptions, Renderer, UploadOptions};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # let scene = lemi_core::SceneBuilder::new().finish();
+//! let gpu = Gpu::new(BackendChoice::Auto)?;
+//! let gpu_scene = GpuScene::upload(&gpu, &scene, &UploadOptions::default())?;
+//! let camera = Camera::look_at(
+//!     glam::DVec3::new(0.0, 2.0, 10.0), glam::DVec3::ZERO, glam::DVec3::Y, 60.0, 1280, 720)?;
+//! let frame = Renderer::new(&gpu)?.render(&gpu_scene, &camera.view(), &RenderOptions::default())?;
+//! assert_eq!(frame.rgba.len(), 1280 * 720 * 4);
+//! # Ok(()) }
+//! ```
+
+mod device;
+mod renderer;
+mod scene;
+pub mod shading;
+pub mod texture;
+
+pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
+pub use renderer::{
+    padded_bytes_per_row, Frame, RenderOptions, Renderer, COLOR_FORMAT, DEPTH_FORMAT,
+    VIEW_DEPTH_FORMAT,
+};
+pub use scene::{
+    GpuChunk, GpuGeometry, GpuMaterials, GpuScene, UploadOptions, DEFAULT_MAX_CHUNK_BYTES,
+};
+pub use shading::{Lighting, ShadingGlobals};

@@ -129,7 +129,10 @@ mod tests {
         std::fs::create_dir_all(a.join("sub")).unwrap();
         std::fs::write(a.join("sub/n.ply"), "ply\n").unwrap();
         let fd2 = fingerprint(&[a.display().to_string()], UpAxis::Y).unwrap();
-        assert_ne!(fd, fd2, "a file deep in a directory changes the fingerprint");
+        assert_ne!(
+            fd, fd2,
+            "a file deep in a directory changes the fingerprint"
+        );
         assert!(fingerprint(&[base.join("missing.ply").display().to_string()], UpAxis::Y).is_err());
         let c1 = fingerprint(&["builtin:city:1000".into()], UpAxis::Y).unwrap();
         let c2 = fingerprint(&["builtin:city:2000".into()], UpAxis::Y).unwrap();

@@ -1,1 +1,0 @@
-//! Compression stages of GI 2002 sec. 5, one file per stage.

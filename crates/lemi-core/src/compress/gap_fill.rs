@@ -1,0 +1,133 @@
+//! Gap filling: closes the one-texel holes that open between a surface's parts in adjacent layers.
+//!
+//! This work is based on: GI 2002 sec. 5.1 (Jeschke, Wimmer et al., *Layered Environment-Map
+//! Impostors for Arbitrary Scenes*). A continuous surface split between a closer layer and the next
+//! more distant one can open a one-texel gap when the viewer moves, because adjacent layers shift by
+//! up to one texel against each other (sec. 4.2, eq. 2). The paper closes it by
+//!
+//! > copying opaque texels that have at least one transparent neighbor (opaque border texels) of
+//! > the current (closer) layer to texels at the same position in the next (more distant) layer,
+//! > that are either opaque texels or transparent border texels (transparent texels that have at
+//! > least one opaque neighbor).
+//!
+//! Choices the paper leaves open, made here:
+//! - *neighbour* means the 8-neighbourhood (the shift between layers can be diagonal); neighbours
+//!   outside the face image are ignored (the surface may continue on the adjacent face);
+//! - every pair `(k, k+1)` is evaluated on the images as they were *before* gap filling, so a
+//!   copied texel is never copied on into a third layer, and the pairs are independent (parallel).
+//!
+//! The whole RGBA value (alpha included) is copied; clip-border flags are left as recorded.
+//!
+//! With the 8-neighbourhood this also performs the 2×2 diagonal fix of TR-186-2-02-04 sec. 2.2
+//! (an 8-connected clipping line recorded in both layers leaves, in each 2×2 block, one texel only
+//! in the closer and one only in the more distant layer; the closer one is an opaque border texel
+//! next to the distant layer's line, so it is copied and the line becomes four-connected).
+
+use rayon::prelude::*;
+
+use super::layer_image::{all3x3, any3x3, common_res, LayerImage};
+use super::CompressError;
+
+/// What gap filling did to one face's layer stack.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GapFillStats {
+    /// Adjacent layer pairs processed.
+    pub pairs: u64,
+    /// Opaque border texels of the closer layers (the candidate sources).
+    pub source_texels: u64,
+    /// Copies into transparent border texels (new opaque texels).
+    pub filled: u64,
+    /// Copies onto opaque texels (colour replaced by the closer layer's).
+    pub overwritten: u64,
+}
+
+impl GapFillStats {
+    /// Sums two statistics.
+    pub fn add(&mut self, o: &GapFillStats) {
+        self.pairs += o.pairs;
+        self.source_texels += o.source_texels;
+        self.filled += o.filled;
+        self.overwritten += o.overwritten;
+    }
+}
+
+/// Texels to write into a layer: linear index and colour.
+type Writes = Vec<(usize, [u8; 4])>;
+
+/// Per-layer masks of sec. 5.1.
+struct Masks {
+    /// Opaque texels with at least one transparent (in-image) 8-neighbour.
+    opaque_border: Vec<bool>,
+    /// Opaque texels, or transparent texels with at least one opaque 8-neighbour: where a copy may go.
+    target: Vec<bool>,
+    /// Opaque texels.
+    opaque: Vec<bool>,
+}
+
+fn masks(layer: &LayerImage) -> Masks {
+    let opaque = layer.opaque_mask();
+    // all 8 in-image neighbours opaque (outside counts as opaque, i.e. is ignored)
+    let interior = all3x3(&opaque, layer.res, true);
+    // some in-image neighbour opaque (outside counts as transparent, i.e. is ignored)
+    let near_opaque = any3x3(&opaque, layer.res, false);
+    let opaque_border = opaque
+        .iter()
+        .zip(&interior)
+        .map(|(&o, &i)| o && !i)
+        .collect();
+    let target = near_opaque; // opaque ⇒ near_opaque; transparent ∧ near_opaque = transparent border
+    Masks {
+        opaque_border,
+        target,
+        opaque,
+    }
+}
+
+/// Gap filling (GI 2002 sec. 5.1) over one face's layers, ordered **nearest first**
+/// (`layers[0]` is closest to the view cell). Modifies the more distant layer of every pair.
+pub fn fill_gaps(layers: &mut [LayerImage]) -> Result<GapFillStats, CompressError> {
+    if common_res(layers)?.is_none() || layers.len() < 2 {
+        return Ok(GapFillStats::default());
+    }
+    let all_masks: Vec<Masks> = layers.par_iter().map(masks).collect();
+    // writes into layer k+1 from the original layer k
+    let writes: Vec<(Writes, GapFillStats)> = (0..layers.len() - 1)
+        .into_par_iter()
+        .map(|k| {
+            let (src, dst) = (&all_masks[k], &all_masks[k + 1]);
+            let mut stats = GapFillStats {
+                pairs: 1,
+                ..Default::default()
+            };
+            let mut w = Vec::new();
+            for (i, &b) in src.opaque_border.iter().enumerate() {
+                if !b {
+                    continue;
+                }
+                stats.source_texels += 1;
+                if dst.target[i] {
+                    if dst.opaque[i] {
+                        stats.overwritten += 1;
+                    } else {
+                        stats.filled += 1;
+                    }
+                    w.push((i, layers[k].texel(i)));
+                }
+            }
+            (w, stats)
+        })
+        .collect();
+    let mut total = GapFillStats::default();
+    for (_, s) in &writes {
+        total.add(s);
+    }
+    layers[1..]
+        .par_iter_mut()
+        .zip(writes.par_iter())
+        .for_each(|(layer, (w, _))| {
+            for &(i, rgba) in w {
+                layer.set_texel(i, rgba);
+            }
+        });
+    Ok(total)
+}

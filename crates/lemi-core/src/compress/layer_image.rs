@@ -1,0 +1,230 @@
+//! The layer image every compression stage works on, and the 3×3 mask operations they share.
+//!
+//! This work is based on: GI 2002 sec. 5 (all layers of a face share one resolution and one
+//! projection, so texel `(x, y)` is the same ray in every layer) and TR-186-2-02-04 sec. 2.2 (the
+//! texels of a polygon's clipping edge are recorded in both adjacent layers: the *clip-border*
+//! texels carried in [`LayerImage::border`]).
+//!
+//! Alpha is binary: a texel is opaque when its alpha is at least [`OPAQUE_ALPHA`]. Texels are
+//! stored row-major, row 0 at the top of the face image (the convention of [`crate::face`]).
+
+use super::CompressError;
+
+/// Smallest alpha value that counts as opaque (the recorder writes 0 or 255).
+pub const OPAQUE_ALPHA: u8 = 128;
+
+/// The fully transparent texel written by the stages that erase texels.
+pub const TRANSPARENT: [u8; 4] = [0, 0, 0, 0];
+
+/// One recorded `(face, layer)` image: `res × res` RGBA8 texels plus the clip-border flags.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LayerImage {
+    /// Texels per side.
+    pub res: u32,
+    /// `res · res · 4` bytes, row-major, row 0 at the top.
+    pub rgba: Vec<u8>,
+    /// `res · res` flags: texel written by the clipping edge of a polygon cut at one of this
+    /// layer's borders (TR sec. 2.2). Hidden-texel removal does not let these texels occlude.
+    pub border: Vec<bool>,
+}
+
+impl LayerImage {
+    /// A fully transparent image without clip-border texels.
+    pub fn new(res: u32) -> Self {
+        let n = res as usize * res as usize;
+        LayerImage {
+            res,
+            rgba: vec![0; 4 * n],
+            border: vec![false; n],
+        }
+    }
+
+    /// Builds an image from its parts, checking the buffer sizes.
+    pub fn from_parts(res: u32, rgba: Vec<u8>, border: Vec<bool>) -> Result<Self, CompressError> {
+        let image = LayerImage { res, rgba, border };
+        image.validate()?;
+        Ok(image)
+    }
+
+    /// Checks that the buffers match `res`.
+    pub fn validate(&self) -> Result<(), CompressError> {
+        let n = self.res as usize * self.res as usize;
+        if self.res == 0 || self.rgba.len() != 4 * n || self.border.len() != n {
+            return Err(CompressError::BadImage {
+                res: self.res,
+                rgba_len: self.rgba.len(),
+                border_len: self.border.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Number of texels (`res²`).
+    pub fn texel_count(&self) -> usize {
+        self.res as usize * self.res as usize
+    }
+
+    /// Linear index of texel `(x, y)`.
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        y as usize * self.res as usize + x as usize
+    }
+
+    /// RGBA of the texel with linear index `i`.
+    pub fn texel(&self, i: usize) -> [u8; 4] {
+        let p = &self.rgba[4 * i..4 * i + 4];
+        [p[0], p[1], p[2], p[3]]
+    }
+
+    /// Writes the texel with linear index `i`.
+    pub fn set_texel(&mut self, i: usize, rgba: [u8; 4]) {
+        self.rgba[4 * i..4 * i + 4].copy_from_slice(&rgba);
+    }
+
+    /// Whether the texel with linear index `i` is opaque.
+    pub fn is_opaque(&self, i: usize) -> bool {
+        self.rgba[4 * i + 3] >= OPAQUE_ALPHA
+    }
+
+    /// Makes a texel transparent (and clears its clip-border flag).
+    pub fn clear_texel(&mut self, i: usize) {
+        self.set_texel(i, TRANSPARENT);
+        self.border[i] = false;
+    }
+
+    /// Number of opaque texels.
+    pub fn opaque_count(&self) -> u64 {
+        self.rgba
+            .chunks_exact(4)
+            .filter(|p| p[3] >= OPAQUE_ALPHA)
+            .count() as u64
+    }
+
+    /// One flag per texel: opaque or not.
+    pub fn opaque_mask(&self) -> Vec<bool> {
+        self.rgba
+            .chunks_exact(4)
+            .map(|p| p[3] >= OPAQUE_ALPHA)
+            .collect()
+    }
+}
+
+/// Checks that all images are valid and share one resolution; returns it (`None` when empty).
+pub fn common_res(layers: &[LayerImage]) -> Result<Option<u32>, CompressError> {
+    let mut res = None;
+    for (k, layer) in layers.iter().enumerate() {
+        layer.validate()?;
+        match res {
+            None => res = Some(layer.res),
+            Some(r) if r != layer.res => {
+                return Err(CompressError::ResolutionMismatch {
+                    layer: k,
+                    expected: r,
+                    found: layer.res,
+                })
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(res)
+}
+
+/// 3×3 "all" of a `res × res` mask: `out[p]` is true when `mask` is true on `p` and on all its
+/// 8 neighbours. Neighbours outside the image count as `outside`.
+pub fn all3x3(mask: &[bool], res: u32, outside: bool) -> Vec<bool> {
+    reduce3x3(mask, res, outside, true)
+}
+
+/// 3×3 "any" of a `res × res` mask: `out[p]` is true when `mask` is true on `p` or on one of its
+/// 8 neighbours. Neighbours outside the image count as `outside`.
+pub fn any3x3(mask: &[bool], res: u32, outside: bool) -> Vec<bool> {
+    reduce3x3(mask, res, outside, false)
+}
+
+/// Separable 3×3 min (`all`) or max (`any`) filter with a constant outside value.
+fn reduce3x3(mask: &[bool], res: u32, outside: bool, all: bool) -> Vec<bool> {
+    if all {
+        reduce3x3_with::<true>(mask, res as usize, outside)
+    } else {
+        reduce3x3_with::<false>(mask, res as usize, outside)
+    }
+}
+
+#[inline(always)]
+fn op3<const ALL: bool>(a: bool, b: bool, c: bool) -> bool {
+    if ALL {
+        a & b & c
+    } else {
+        a | b | c
+    }
+}
+
+fn reduce3x3_with<const ALL: bool>(mask: &[bool], r: usize, outside: bool) -> Vec<bool> {
+    // horizontal pass
+    let mut h = vec![false; r * r];
+    for (hrow, row) in h.chunks_exact_mut(r).zip(mask.chunks_exact(r)) {
+        if r == 1 {
+            hrow[0] = op3::<ALL>(outside, row[0], outside);
+            continue;
+        }
+        hrow[0] = op3::<ALL>(outside, row[0], row[1]);
+        for (o, w) in hrow[1..r - 1].iter_mut().zip(row.windows(3)) {
+            *o = op3::<ALL>(w[0], w[1], w[2]);
+        }
+        hrow[r - 1] = op3::<ALL>(row[r - 2], row[r - 1], outside);
+    }
+    // vertical pass
+    let pad = vec![outside; r];
+    let mut out = vec![false; r * r];
+    for (y, orow) in out.chunks_exact_mut(r).enumerate() {
+        let up = if y == 0 {
+            &pad[..]
+        } else {
+            &h[(y - 1) * r..y * r]
+        };
+        let mid = &h[y * r..(y + 1) * r];
+        let down = if y + 1 == r {
+            &pad[..]
+        } else {
+            &h[(y + 1) * r..(y + 2) * r]
+        };
+        for (((o, &a), &b), &c) in orow.iter_mut().zip(up).zip(mid).zip(down) {
+            *o = op3::<ALL>(a, b, c);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reduce3x3_matches_brute_force() {
+        let res = 7u32;
+        let mask: Vec<bool> = (0..49).map(|i| (i * 37 + i / 3) % 5 != 0).collect();
+        for outside in [false, true] {
+            let all = all3x3(&mask, res, outside);
+            let any = any3x3(&mask, res, outside);
+            for y in 0..7i32 {
+                for x in 0..7i32 {
+                    let mut a = true;
+                    let mut o = false;
+                    for dy in -1..=1 {
+                        for dx in -1..=1 {
+                            let (nx, ny) = (x + dx, y + dy);
+                            let v = if (0..7).contains(&nx) && (0..7).contains(&ny) {
+                                mask[(ny * 7 + nx) as usize]
+                            } else {
+                                outside
+                            };
+                            a &= v;
+                            o |= v;
+                        }
+                    }
+                    assert_eq!(all[(y * 7 + x) as usize], a);
+                    assert_eq!(any[(y * 7 + x) as usize], o);
+                }
+            }
+        }
+    }
+}

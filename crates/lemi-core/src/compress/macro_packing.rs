@@ -1,0 +1,459 @@
+//! Macro-texture packing: packs the micro-textures of a view cell into few power-of-two atlases.
+//!
+//! This work is based on: GI 2002 sec. 5.4 (Jeschke, Wimmer et al.), which uses a greedy packer:
+//! 1. every micro-texture is rotated so that it is "top-down" (height ≥ width);
+//! 2. the list is sorted by decreasing height, equal heights by increasing width;
+//! 3. a new macro-texture gets the height of the first remaining micro-texture rounded up to a power
+//!    of two, and the width `summed area of the remaining micro-textures / height`, rounded up to a
+//!    power of two (here also at least the first one's width, and at most `max_size`);
+//! 4. it is filled with the bottom-left rule (Chazelle) starting from the first of the list until the
+//!    right border is reached, then the remaining space with the left-bottom rule starting from the
+//!    last (smallest) micro-texture; what does not fit waits for the next macro-texture.
+//!
+//! "Bottom" is row 0 of the macro-texture here (mirroring does not change a packing). Phase 1 ends at
+//! the first micro-texture that no longer fits on the bottom row. Free space is tracked as maximal
+//! free rectangles, so both rules find the exact lowest-then-leftmost (resp. leftmost-then-lowest)
+//! position where a rectangle fits. [`analyze_packing`] checks a packing: all inside, no overlap,
+//! power-of-two sizes.
+//!
+//! A rotated micro-texture is turned 90° clockwise: its texel `(x, y)` of a `w × h` micro-texture
+//! lands at `(px + h − 1 − y, py + x)`; see [`MacroPlacement::macro_texel`] and
+//! [`MacroPlacement::macro_corners`].
+
+use rayon::prelude::*;
+
+use super::micro_textures::MicroTexture;
+use super::CompressError;
+
+/// Parameters of macro-texture packing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PackingOptions {
+    /// Largest macro-texture side (a power of two; GPUs guarantee 2048 on downlevel, 8192 usually).
+    pub max_size: u32,
+}
+
+impl Default for PackingOptions {
+    fn default() -> Self {
+        PackingOptions { max_size: 4096 }
+    }
+}
+
+/// Where a micro-texture went.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct MacroPlacement {
+    /// Index of the macro-texture.
+    pub macro_index: u32,
+    /// Texel of the macro-texture where the footprint's top-left corner lies.
+    pub x: u32,
+    pub y: u32,
+    /// Turned 90° clockwise (footprint `h × w` for a `w × h` micro-texture).
+    pub rotated: bool,
+}
+
+impl MacroPlacement {
+    /// Footprint `(width, height)` in the macro-texture of a `w × h` micro-texture.
+    pub fn footprint(&self, w: u32, h: u32) -> (u32, u32) {
+        if self.rotated {
+            (h, w)
+        } else {
+            (w, h)
+        }
+    }
+
+    /// Macro-texture texel of micro-texture texel `(x, y)` (micro-texture size `w × h`).
+    pub fn macro_texel(&self, w: u32, h: u32, x: u32, y: u32) -> (u32, u32) {
+        let _ = w;
+        if self.rotated {
+            (self.x + h - 1 - y, self.y + x)
+        } else {
+            (self.x + x, self.y + y)
+        }
+    }
+
+    /// Macro-texture texel-edge coordinates of the micro-texture's corners top-left, top-right,
+    /// bottom-right, bottom-left (the order of [`super::quad_corners`]); divide by the
+    /// macro-texture size for texture coordinates.
+    pub fn macro_corners(&self, w: u32, h: u32) -> [[u32; 2]; 4] {
+        // micro-texture edge point (X, Y) maps to (x + X, y + Y), or rotated to (x + h − Y, y + X)
+        let map = |xx: u32, yy: u32| {
+            if self.rotated {
+                [self.x + h - yy, self.y + xx]
+            } else {
+                [self.x + xx, self.y + yy]
+            }
+        };
+        [map(0, 0), map(w, 0), map(w, h), map(0, h)]
+    }
+}
+
+/// One packed atlas.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MacroTexture {
+    pub width: u32,
+    pub height: u32,
+    /// `width · height · 4` RGBA bytes, row-major; unused texels are transparent.
+    pub rgba: Vec<u8>,
+}
+
+/// A packing of rectangles: macro-texture sizes and one placement per input rectangle.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Packing {
+    /// `(width, height)` of every macro-texture.
+    pub macro_sizes: Vec<(u32, u32)>,
+    /// One per input rectangle, in input order.
+    pub placements: Vec<MacroPlacement>,
+}
+
+/// What a packing measures.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PackingStats {
+    pub macro_textures: u64,
+    pub micro_textures: u64,
+    /// Texels of all micro-textures.
+    pub micro_texels: u64,
+    /// Texels of all macro-textures.
+    pub macro_texels: u64,
+    /// RGBA8 bytes of all macro-textures (before PNG).
+    pub macro_bytes: u64,
+    /// `micro_texels / macro_texels` (1 when empty).
+    pub efficiency: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Rect {
+    x: u32,
+    y: u32,
+    w: u32,
+    h: u32,
+}
+
+impl Rect {
+    fn x1(&self) -> u32 {
+        self.x + self.w
+    }
+    fn y1(&self) -> u32 {
+        self.y + self.h
+    }
+    fn overlaps(&self, o: &Rect) -> bool {
+        self.x < o.x1() && o.x < self.x1() && self.y < o.y1() && o.y < self.y1()
+    }
+    fn contains(&self, o: &Rect) -> bool {
+        o.x >= self.x && o.y >= self.y && o.x1() <= self.x1() && o.y1() <= self.y1()
+    }
+}
+
+/// Free space of one macro-texture as the set of maximal free rectangles.
+struct FreeSpace {
+    free: Vec<Rect>,
+}
+
+impl FreeSpace {
+    fn new(w: u32, h: u32) -> Self {
+        FreeSpace {
+            free: vec![Rect { x: 0, y: 0, w, h }],
+        }
+    }
+
+    /// Best position by key among free rectangles that can hold `w × h` (every lexicographically
+    /// smallest position of a fitting rectangle is a corner of some maximal free rectangle).
+    fn find(&self, w: u32, h: u32, key: impl Fn(&Rect) -> (u32, u32)) -> Option<(u32, u32)> {
+        self.free
+            .iter()
+            .filter(|f| f.w >= w && f.h >= h)
+            .min_by_key(|f| key(f))
+            .map(|f| (f.x, f.y))
+    }
+
+    /// Bottom-left rule: lowest, then leftmost.
+    fn bottom_left(&self, w: u32, h: u32) -> Option<(u32, u32)> {
+        self.find(w, h, |f| (f.y, f.x))
+    }
+
+    /// Left-bottom rule: leftmost, then lowest.
+    fn left_bottom(&self, w: u32, h: u32) -> Option<(u32, u32)> {
+        self.find(w, h, |f| (f.x, f.y))
+    }
+
+    fn place(&mut self, r: Rect) {
+        let mut new = Vec::new();
+        self.free.retain(|f| {
+            if !f.overlaps(&r) {
+                return true;
+            }
+            if r.x > f.x {
+                new.push(Rect { w: r.x - f.x, ..*f });
+            }
+            if r.x1() < f.x1() {
+                new.push(Rect {
+                    x: r.x1(),
+                    w: f.x1() - r.x1(),
+                    ..*f
+                });
+            }
+            if r.y > f.y {
+                new.push(Rect { h: r.y - f.y, ..*f });
+            }
+            if r.y1() < f.y1() {
+                new.push(Rect {
+                    y: r.y1(),
+                    h: f.y1() - r.y1(),
+                    ..*f
+                });
+            }
+            false
+        });
+        // old rectangles are maximal and pairwise non-nested, and a new one lies inside a removed
+        // old one, so only the new ones can be redundant
+        let mut keep = vec![true; new.len()];
+        for i in 0..new.len() {
+            let redundant = self.free.iter().any(|f| f.contains(&new[i]))
+                || new.iter().enumerate().any(|(j, n)| {
+                    j != i && keep[j] && n.contains(&new[i]) && (n != &new[i] || j < i)
+                });
+            keep[i] = !redundant;
+        }
+        self.free.extend(
+            new.into_iter()
+                .zip(keep)
+                .filter(|(_, k)| *k)
+                .map(|(n, _)| n),
+        );
+    }
+}
+
+/// Packs rectangles `(width, height)` with the GI 2002 sec. 5.4 algorithm.
+pub fn pack_rects(
+    sizes: &[(u32, u32)],
+    options: &PackingOptions,
+) -> Result<Packing, CompressError> {
+    let max = options.max_size;
+    if max == 0 || !max.is_power_of_two() {
+        return Err(CompressError::BadOption {
+            option: "macro-texture max size",
+            reason: format!("{max} is not a power of two"),
+        });
+    }
+    // (index, w, h, rotated) with h >= w after rotation
+    let mut items: Vec<(usize, u32, u32, bool)> = Vec::with_capacity(sizes.len());
+    for (i, &(w, h)) in sizes.iter().enumerate() {
+        if w == 0 || h == 0 || w.max(h) > max {
+            return Err(CompressError::Invalid(format!(
+                "micro-texture {i} of {w}×{h} texels cannot be packed into macro-textures of at most {max}²"
+            )));
+        }
+        items.push(if w > h {
+            (i, h, w, true)
+        } else {
+            (i, w, h, false)
+        });
+    }
+    items.sort_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
+    let mut placements = vec![
+        MacroPlacement {
+            macro_index: 0,
+            x: 0,
+            y: 0,
+            rotated: false
+        };
+        sizes.len()
+    ];
+    let mut macro_sizes = Vec::new();
+    let mut remaining = items;
+    while let Some(&(_, w0, h0, _)) = remaining.first() {
+        let mi = macro_sizes.len() as u32;
+        let height = h0.next_power_of_two();
+        let area: u64 = remaining.iter().map(|r| r.1 as u64 * r.2 as u64).sum();
+        let width = area
+            .div_ceil(height as u64)
+            .next_power_of_two()
+            .max(w0.next_power_of_two() as u64)
+            .min(max as u64) as u32;
+        let mut space = FreeSpace::new(width, height);
+        let mut placed = vec![false; remaining.len()];
+        let mut put = |k: usize, x: u32, y: u32, space: &mut FreeSpace, placed: &mut [bool]| {
+            let (i, w, h, rotated) = remaining[k];
+            space.place(Rect { x, y, w, h });
+            placed[k] = true;
+            placements[i] = MacroPlacement {
+                macro_index: mi,
+                x,
+                y,
+                rotated,
+            };
+        };
+        // phase 1: bottom-left rule from the first (tallest) until the right border is reached
+        let mut k = 0;
+        while k < remaining.len() {
+            let (_, w, h, _) = remaining[k];
+            match space.bottom_left(w, h) {
+                Some((x, 0)) => put(k, x, 0, &mut space, &mut placed),
+                _ => break,
+            }
+            k += 1;
+        }
+        // phase 2: left-bottom rule from the last (smallest) on
+        let mut free_area: u64 = width as u64 * height as u64
+            - placed
+                .iter()
+                .zip(&remaining)
+                .filter(|(p, _)| **p)
+                .map(|(_, r)| r.1 as u64 * r.2 as u64)
+                .sum::<u64>();
+        for j in (k..remaining.len()).rev() {
+            let (_, w, h, _) = remaining[j];
+            if (w as u64 * h as u64) > free_area {
+                continue;
+            }
+            if let Some((x, y)) = space.left_bottom(w, h) {
+                put(j, x, y, &mut space, &mut placed);
+                free_area -= w as u64 * h as u64;
+            }
+        }
+        macro_sizes.push((width, height));
+        remaining = remaining
+            .into_iter()
+            .zip(placed)
+            .filter(|(_, p)| !p)
+            .map(|(r, _)| r)
+            .collect();
+    }
+    Ok(Packing {
+        macro_sizes,
+        placements,
+    })
+}
+
+/// Checks a packing of rectangles `sizes`: one placement per rectangle, each inside its
+/// macro-texture, no two overlapping, power-of-two macro sizes, no empty macro-texture. Returns the
+/// statistics or the first violation.
+pub fn analyze_packing(
+    sizes: &[(u32, u32)],
+    packing: &Packing,
+) -> Result<PackingStats, CompressError> {
+    let bad = |m: String| Err(CompressError::Invalid(m));
+    if packing.placements.len() != sizes.len() {
+        return bad(format!(
+            "{} placements for {} micro-textures",
+            packing.placements.len(),
+            sizes.len()
+        ));
+    }
+    for (m, &(w, h)) in packing.macro_sizes.iter().enumerate() {
+        if !w.is_power_of_two() || !h.is_power_of_two() {
+            return bad(format!("macro-texture {m} is {w}×{h}, not powers of two"));
+        }
+    }
+    let mut per_macro: Vec<Vec<(usize, Rect)>> = vec![Vec::new(); packing.macro_sizes.len()];
+    for (i, (p, &(w, h))) in packing.placements.iter().zip(sizes).enumerate() {
+        let Some(&(mw, mh)) = packing.macro_sizes.get(p.macro_index as usize) else {
+            return bad(format!(
+                "micro-texture {i} placed in a missing macro-texture"
+            ));
+        };
+        let (fw, fh) = p.footprint(w, h);
+        let r = Rect {
+            x: p.x,
+            y: p.y,
+            w: fw,
+            h: fh,
+        };
+        if r.x1() > mw || r.y1() > mh {
+            return bad(format!(
+                "micro-texture {i} at ({}, {}) size {fw}×{fh} leaves macro-texture {} of {mw}×{mh}",
+                p.x, p.y, p.macro_index
+            ));
+        }
+        per_macro[p.macro_index as usize].push((i, r));
+    }
+    for (m, rects) in per_macro.iter_mut().enumerate() {
+        if rects.is_empty() {
+            return bad(format!("macro-texture {m} is empty"));
+        }
+        // sweep in x: only rectangles whose x-ranges intersect need a full test
+        rects.sort_by_key(|(_, r)| r.x);
+        for a in 0..rects.len() {
+            for b in a + 1..rects.len() {
+                if rects[b].1.x >= rects[a].1.x1() {
+                    break;
+                }
+                if rects[a].1.overlaps(&rects[b].1) {
+                    return bad(format!(
+                        "micro-textures {} and {} overlap in macro-texture {m}",
+                        rects[a].0, rects[b].0
+                    ));
+                }
+            }
+        }
+    }
+    let micro_texels: u64 = sizes.iter().map(|&(w, h)| w as u64 * h as u64).sum();
+    let macro_texels: u64 = packing
+        .macro_sizes
+        .iter()
+        .map(|&(w, h)| w as u64 * h as u64)
+        .sum();
+    Ok(PackingStats {
+        macro_textures: packing.macro_sizes.len() as u64,
+        micro_textures: sizes.len() as u64,
+        micro_texels,
+        macro_texels,
+        macro_bytes: 4 * macro_texels,
+        efficiency: if macro_texels == 0 {
+            1.0
+        } else {
+            micro_texels as f64 / macro_texels as f64
+        },
+    })
+}
+
+/// Packs micro-textures (GI 2002 sec. 5.4) and copies their pixels into the macro-textures.
+/// Returns the macro-textures, one placement per micro-texture (input order) and the statistics.
+pub fn pack_micro_textures(
+    micros: &[MicroTexture],
+    options: &PackingOptions,
+) -> Result<(Vec<MacroTexture>, Vec<MacroPlacement>, PackingStats), CompressError> {
+    for (i, m) in micros.iter().enumerate() {
+        let r = m.rect;
+        if r.x1 < r.x0 || r.y1 < r.y0 || m.pixels.len() as u64 != 4 * r.area() {
+            return Err(CompressError::Invalid(format!(
+                "micro-texture {i}: rectangle {r:?} does not match its {} pixel bytes",
+                m.pixels.len()
+            )));
+        }
+    }
+    let sizes: Vec<(u32, u32)> = micros
+        .iter()
+        .map(|m| (m.rect.width(), m.rect.height()))
+        .collect();
+    let packing = pack_rects(&sizes, options)?;
+    let stats = analyze_packing(&sizes, &packing)?;
+    let mut by_macro: Vec<Vec<usize>> = vec![Vec::new(); packing.macro_sizes.len()];
+    for (i, p) in packing.placements.iter().enumerate() {
+        by_macro[p.macro_index as usize].push(i);
+    }
+    let macros = packing
+        .macro_sizes
+        .par_iter()
+        .zip(by_macro.par_iter())
+        .map(|(&(mw, mh), members)| {
+            let mut rgba = vec![0u8; mw as usize * mh as usize * 4];
+            for &i in members {
+                let (m, p) = (&micros[i], &packing.placements[i]);
+                let (w, h) = (m.rect.width(), m.rect.height());
+                for y in 0..h {
+                    for x in 0..w {
+                        let (mx, my) = p.macro_texel(w, h, x, y);
+                        let s = 4 * (y * w + x) as usize;
+                        let d = 4 * (my as usize * mw as usize + mx as usize);
+                        rgba[d..d + 4].copy_from_slice(&m.pixels[s..s + 4]);
+                    }
+                }
+            }
+            MacroTexture {
+                width: mw,
+                height: mh,
+                rgba,
+            }
+        })
+        .collect();
+    Ok((macros, packing.placements, stats))
+}

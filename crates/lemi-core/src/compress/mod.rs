@@ -1,0 +1,203 @@
+//! Compression stages of GI 2002 sec. 5 (Jeschke, Wimmer et al., *Layered Environment-Map
+//! Impostors for Arbitrary Scenes*), one file per stage, each a function over plain layer images
+//! that returns its output and the statistics that measure it:
+//!
+//! | stage | file | paper |
+//! |---|---|---|
+//! | gap filling | [`gap_fill`] | sec. 5.1 |
+//! | hidden-texel removal | [`hidden_texels`] | sec. 5.2 |
+//! | micro-textures (impostor quads) | [`micro_textures`] | sec. 5.3 |
+//! | macro-texture packing | [`macro_packing`] | sec. 5.4 |
+//!
+//! PNG storage of the macro-textures (end of sec. 5.4) belongs to the bundle writer.
+//! [`compress_cell`] runs the stages in order for one view cell, in parallel over faces and layers
+//! (deterministic: the result does not depend on the thread count). See `docs/COMPRESSION.md`.
+
+pub mod gap_fill;
+pub mod hidden_texels;
+pub mod layer_image;
+pub mod macro_packing;
+pub mod micro_textures;
+
+use rayon::prelude::*;
+
+pub use gap_fill::{fill_gaps, GapFillStats};
+pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
+pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
+pub use macro_packing::{
+    analyze_packing, pack_micro_textures, pack_rects, MacroPlacement, MacroTexture, Packing,
+    PackingOptions, PackingStats,
+};
+pub use micro_textures::{
+    analyze_micro_textures, extract_micro_textures, quad_corners, MicroTexture,
+    MicroTextureOptions, MicroTextureStats, TexelRect,
+};
+
+use crate::face::Face;
+
+/// Errors of the compression stages; each says what is wrong with which input.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CompressError {
+    #[error("layer image of resolution {res} has {rgba_len} RGBA bytes and {border_len} border flags (expected res²·4 and res², res ≥ 1)")]
+    BadImage {
+        res: u32,
+        rgba_len: usize,
+        border_len: usize,
+    },
+    #[error("layer {layer} has resolution {found}, the other layers of its face {expected}")]
+    ResolutionMismatch {
+        layer: usize,
+        expected: u32,
+        found: u32,
+    },
+    #[error("face {face}: {reason}")]
+    BadFace { face: Face, reason: String },
+    #[error("{option}: {reason}")]
+    BadOption {
+        option: &'static str,
+        reason: String,
+    },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// The layers of one face of a view cell with their distances, in either order: nearest first
+/// (distances strictly increasing) or farthest first, as recorded (strictly decreasing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaceLayers {
+    pub face: Face,
+    /// Distance of every layer from the reference viewpoint, strictly monotonic.
+    pub distances: Vec<f64>,
+    pub layers: Vec<LayerImage>,
+}
+
+/// Parameters of all stages.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CompressOptions {
+    pub hidden: HiddenTexelOptions,
+    pub micro: MicroTextureOptions,
+    pub packing: PackingOptions,
+}
+
+/// Statistics of a whole cell.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CompressStats {
+    /// RGBA8 bytes of all input layer images.
+    pub layer_bytes: u64,
+    pub gap_fill: GapFillStats,
+    pub hidden: HiddenTexelStats,
+    pub micro: MicroTextureStats,
+    pub packing: PackingStats,
+}
+
+/// A compressed view cell: the quads, the atlases and where each quad's texels are.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompressedCell {
+    /// All micro-textures, ordered by face (input order), layer, then extraction order.
+    pub micro_textures: Vec<MicroTexture>,
+    pub macro_textures: Vec<MacroTexture>,
+    /// One per micro-texture.
+    pub placements: Vec<MacroPlacement>,
+    pub stats: CompressStats,
+}
+
+/// Runs gap filling, hidden-texel removal, micro-texture extraction and packing on one view cell.
+/// The layer images are modified in place (gap filled, hidden texels erased). A micro-texture's
+/// `layer` is the index of its layer in the caller's order.
+pub fn compress_cell(
+    faces: &mut [FaceLayers],
+    options: &CompressOptions,
+) -> Result<CompressedCell, CompressError> {
+    options.micro.validate()?;
+    for f in faces.iter() {
+        if f.distances.len() != f.layers.len() {
+            return Err(CompressError::BadFace {
+                face: f.face,
+                reason: format!(
+                    "{} layer images but {} distances",
+                    f.layers.len(),
+                    f.distances.len()
+                ),
+            });
+        }
+        if f.distances.iter().any(|d| !(d.is_finite() && *d > 0.0))
+            || !(f.distances.windows(2).all(|w| w[0] < w[1])
+                || f.distances.windows(2).all(|w| w[0] > w[1]))
+        {
+            return Err(CompressError::BadFace {
+                face: f.face,
+                reason: format!(
+                    "layer distances must be finite, positive and strictly monotonic, got {:?}",
+                    f.distances
+                ),
+            });
+        }
+        layer_image::common_res(&f.layers).map_err(|e| CompressError::BadFace {
+            face: f.face,
+            reason: e.to_string(),
+        })?;
+    }
+    let layer_bytes = faces
+        .iter()
+        .flat_map(|f| &f.layers)
+        .map(|l| l.rgba.len() as u64)
+        .sum();
+    // stages 1 and 2 per face (in parallel over faces)
+    let per_face: Vec<(GapFillStats, HiddenTexelStats)> = faces
+        .par_iter_mut()
+        .map(|f| -> Result<_, CompressError> {
+            // the stages want the nearest layer first
+            let far_first = f.distances.len() > 1 && f.distances[0] > f.distances[1];
+            if far_first {
+                f.layers.reverse();
+            }
+            let mut result = fill_gaps(&mut f.layers)
+                .and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
+            if far_first {
+                f.layers.reverse();
+                if let Ok((_, h)) = &mut result {
+                    h.removed_per_layer.reverse();
+                }
+            }
+            result
+        })
+        .collect::<Result<_, _>>()?;
+    let mut stats = CompressStats {
+        layer_bytes,
+        ..Default::default()
+    };
+    for (g, h) in &per_face {
+        stats.gap_fill.add(g);
+        stats.hidden.add(h);
+    }
+    // stage 3 per (face, layer), in parallel, collected in order
+    let jobs: Vec<(Face, u32, f64, &LayerImage)> = faces
+        .iter()
+        .flat_map(|f| {
+            f.layers
+                .iter()
+                .zip(&f.distances)
+                .enumerate()
+                .map(move |(k, (l, &d))| (f.face, k as u32, d, l))
+        })
+        .collect();
+    let extracted: Vec<(Vec<MicroTexture>, MicroTextureStats)> = jobs
+        .par_iter()
+        .map(|&(face, k, d, l)| extract_micro_textures(l, face, k, d, &options.micro))
+        .collect::<Result<_, _>>()?;
+    let mut micro_textures = Vec::new();
+    for (m, s) in extracted {
+        stats.micro.add(&s);
+        micro_textures.extend(m);
+    }
+    // stage 4 over the whole cell
+    let (macro_textures, placements, packing) =
+        pack_micro_textures(&micro_textures, &options.packing)?;
+    stats.packing = packing;
+    Ok(CompressedCell {
+        micro_textures,
+        macro_textures,
+        placements,
+        stats,
+    })
+}

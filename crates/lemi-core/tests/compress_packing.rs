@@ -1,0 +1,289 @@
+//! Macro-texture packing (GI 2002 sec. 5.4): known answers for the sort and fill rules, and
+//! properties on random rectangle sets (no overlap, all inside, power-of-two sizes, every pixel
+//! copied, rotated ones included).
+
+use lemi_core::compress::{
+    analyze_packing, pack_micro_textures, pack_rects, MacroPlacement, MicroTexture, Packing,
+    PackingOptions, TexelRect,
+};
+use lemi_core::Face;
+use proptest::prelude::*;
+
+fn opts(max_size: u32) -> PackingOptions {
+    PackingOptions { max_size }
+}
+
+fn at(macro_index: u32, x: u32, y: u32, rotated: bool) -> MacroPlacement {
+    MacroPlacement {
+        macro_index,
+        x,
+        y,
+        rotated,
+    }
+}
+
+#[test]
+fn rotated_to_top_down_and_placed_bottom_left() {
+    // (8×4) turns into 4×8; both 4×8: macro height 8, width 64/8 = 8, side by side
+    let p = pack_rects(&[(4, 8), (8, 4)], &opts(64)).unwrap();
+    assert_eq!(p.macro_sizes, vec![(8, 8)]);
+    assert_eq!(p.placements, vec![at(0, 0, 0, false), at(0, 4, 0, true)]);
+    let s = analyze_packing(&[(4, 8), (8, 4)], &p).unwrap();
+    assert_eq!(s.efficiency, 1.0);
+    assert_eq!(s.macro_bytes, 256);
+}
+
+#[test]
+fn sorted_by_height_then_width_then_small_ones_fill_left_bottom() {
+    // heights 16, 16, 8, 4 (after rotation); equal heights: narrower first.
+    // area = 10·16 + 6·16 + 8·8 + 4·4 = 336 → height 16, width 336/16 = 21 → 32.
+    // Phase 1 along the bottom: 6×16 at x 0, 10×16 at x 6, 8×8 at x 16, 4×4 at x 24: all fit.
+    let sizes = [(10, 16), (16, 6), (8, 8), (4, 4)];
+    let p = pack_rects(&sizes, &opts(256)).unwrap();
+    assert_eq!(p.macro_sizes, vec![(32, 16)]);
+    assert_eq!(
+        p.placements,
+        vec![
+            at(0, 6, 0, false),
+            at(0, 0, 0, true),
+            at(0, 16, 0, false),
+            at(0, 24, 0, false)
+        ]
+    );
+    // two 16×16 fill a macro of 32 × 16 (area 640 / 16 = 40 → 64, capped at max_size 32); the
+    // 8×8 ones find no space left and start a second macro-texture of height 8, width 128/8 = 16.
+    let sizes = [(16, 16), (16, 16), (8, 8), (8, 8)];
+    let p = pack_rects(&sizes, &opts(32)).unwrap();
+    assert_eq!(p.macro_sizes, vec![(32, 16), (16, 8)]);
+    assert_eq!(
+        p.placements,
+        vec![
+            at(0, 0, 0, false),
+            at(0, 16, 0, false),
+            at(1, 0, 0, false),
+            at(1, 8, 0, false)
+        ]
+    );
+}
+
+#[test]
+fn the_left_bottom_phase_starts_with_the_smallest() {
+    // 8×16, 4×4, 2×2: area 148 → height 16, width 148/16 → 10 → 16.
+    // Phase 1: 8×16 at (0,0), then 4×4 fits on the bottom at (8,0), then 2×2 at (12,0).
+    let p = pack_rects(&[(8, 16), (4, 4), (2, 2)], &opts(64)).unwrap();
+    assert_eq!(
+        p.placements,
+        vec![at(0, 0, 0, false), at(0, 8, 0, false), at(0, 12, 0, false)]
+    );
+    // 4×16 (narrower, first), 8×16, 4×4, 2×2: area 212 → width 16. Phase 1 puts the first three
+    // on the bottom row (x = 0, 4, 12); the 2×2 no longer fits at y = 0, which ends phase 1, and
+    // phase 2 (left-bottom, smallest first) puts it at the leftmost free x = 12, lowest y = 4.
+    let p = pack_rects(&[(8, 16), (4, 16), (4, 4), (2, 2)], &opts(64)).unwrap();
+    assert_eq!(p.macro_sizes, vec![(16, 16)]);
+    assert_eq!(
+        p.placements,
+        vec![
+            at(0, 4, 0, false),
+            at(0, 0, 0, false),
+            at(0, 12, 0, false),
+            at(0, 12, 4, false)
+        ]
+    );
+}
+
+#[test]
+fn oversized_and_empty_rectangles_are_errors() {
+    assert!(pack_rects(&[(65, 3)], &opts(64)).is_err());
+    assert!(pack_rects(&[(0, 3)], &opts(64)).is_err());
+    assert!(pack_rects(&[(1, 1)], &opts(48)).is_err());
+    assert_eq!(pack_rects(&[], &opts(64)).unwrap(), Packing::default());
+}
+
+#[test]
+fn analyzer_catches_overlaps_and_bad_sizes() {
+    let sizes = [(4, 4), (4, 4)];
+    let overlap = Packing {
+        macro_sizes: vec![(8, 8)],
+        placements: vec![at(0, 0, 0, false), at(0, 3, 3, false)],
+    };
+    assert!(analyze_packing(&sizes, &overlap).is_err());
+    let outside = Packing {
+        macro_sizes: vec![(8, 8)],
+        placements: vec![at(0, 0, 0, false), at(0, 5, 0, false)],
+    };
+    assert!(analyze_packing(&sizes, &outside).is_err());
+    let not_pow2 = Packing {
+        macro_sizes: vec![(12, 4)],
+        placements: vec![at(0, 0, 0, false), at(0, 4, 0, false)],
+    };
+    assert!(analyze_packing(&sizes, &not_pow2).is_err());
+}
+
+fn micro(w: u32, h: u32, seed: u64) -> MicroTexture {
+    let mut s = seed | 1;
+    let mut pixels = Vec::with_capacity((w * h * 4) as usize);
+    for _ in 0..w * h {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        let b = s.to_le_bytes();
+        pixels.extend_from_slice(&[b[0], b[1], b[2], 255]);
+    }
+    MicroTexture {
+        face: Face::PosX,
+        layer: 0,
+        distance: 1.0,
+        res: 64,
+        rect: TexelRect {
+            x0: 0,
+            y0: 0,
+            x1: w,
+            y1: h,
+        },
+        pixels,
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+    #[test]
+    fn packing_keeps_everything_inside_without_overlap_and_copies_every_pixel(
+        sizes in prop::collection::vec((1u32..=40, 1u32..=40), 1..80),
+        max_log in 6u32..9,
+        seed in any::<u64>(),
+    ) {
+        let max = 1 << max_log;
+        let micros: Vec<MicroTexture> = sizes.iter().enumerate()
+            .map(|(i, &(w, h))| micro(w, h, seed.wrapping_add(i as u64)))
+            .collect();
+        let (macros, placements, stats) = pack_micro_textures(&micros, &opts(max)).unwrap();
+        let packing = Packing {
+            macro_sizes: macros.iter().map(|m| (m.width, m.height)).collect(),
+            placements: placements.clone(),
+        };
+        prop_assert_eq!(analyze_packing(&sizes, &packing).unwrap(), stats);
+        for m in &macros {
+            prop_assert!(m.width.is_power_of_two() && m.height.is_power_of_two());
+            prop_assert!(m.width <= max && m.height <= max);
+        }
+        for (mt, p) in micros.iter().zip(&placements) {
+            let (w, h) = (mt.rect.width(), mt.rect.height());
+            // top-down after rotation
+            let (fw, fh) = p.footprint(w, h);
+            prop_assert!(fh >= fw);
+            prop_assert_eq!(p.rotated, w > h);
+            let mac = &macros[p.macro_index as usize];
+            let corners = p.macro_corners(w, h);
+            for y in 0..h {
+                for x in 0..w {
+                    let (mx, my) = p.macro_texel(w, h, x, y);
+                    let d = 4 * (my * mac.width + mx) as usize;
+                    let s = 4 * (y * w + x) as usize;
+                    prop_assert_eq!(&mac.rgba[d..d + 4], &mt.pixels[s..s + 4]);
+                    // the texel centre, interpolated between the quad corners' texture coordinates,
+                    // lands in the centre of that macro texel
+                    let (u, v) = ((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+                    let lerp = |k: usize| {
+                        let top = corners[0][k] as f64 * (1.0 - u) + corners[1][k] as f64 * u;
+                        let bottom = corners[3][k] as f64 * (1.0 - u) + corners[2][k] as f64 * u;
+                        top * (1.0 - v) + bottom * v
+                    };
+                    prop_assert!((lerp(0) - (mx as f64 + 0.5)).abs() < 1e-9);
+                    prop_assert!((lerp(1) - (my as f64 + 0.5)).abs() < 1e-9);
+                }
+            }
+        }
+        // texels outside every footprint stay transparent
+        let used: u64 = macros.iter().map(|m| m.rgba.chunks_exact(4).filter(|p| p[3] != 0).count() as u64).sum();
+        prop_assert_eq!(used, stats.micro_texels);
+    }
+}
+
+/// The GI 2002 sec. 5.4 packer written the slow way, on an occupancy grid: every position is tried,
+/// so its bottom-left / left-bottom positions are exact by construction.
+fn brute_pack(sizes: &[(u32, u32)], max: u32) -> Packing {
+    let mut items: Vec<(usize, u32, u32, bool)> = sizes
+        .iter()
+        .enumerate()
+        .map(|(i, &(w, h))| {
+            if w > h {
+                (i, h, w, true)
+            } else {
+                (i, w, h, false)
+            }
+        })
+        .collect();
+    items.sort_by(|a, b| b.2.cmp(&a.2).then(a.1.cmp(&b.1)).then(a.0.cmp(&b.0)));
+    let mut out = Packing {
+        macro_sizes: Vec::new(),
+        placements: vec![at(0, 0, 0, false); sizes.len()],
+    };
+    while !items.is_empty() {
+        let mi = out.macro_sizes.len() as u32;
+        let h0 = items[0].2.next_power_of_two();
+        let area: u64 = items.iter().map(|r| r.1 as u64 * r.2 as u64).sum();
+        let w0 = (area.div_ceil(h0 as u64).next_power_of_two())
+            .max(items[0].1.next_power_of_two() as u64)
+            .min(max as u64) as u32;
+        let mut grid = vec![false; (w0 * h0) as usize];
+        let fits = |grid: &[bool], x: u32, y: u32, w: u32, h: u32| {
+            x + w <= w0
+                && y + h <= h0
+                && (y..y + h).all(|yy| (x..x + w).all(|xx| !grid[(yy * w0 + xx) as usize]))
+        };
+        let mut placed = vec![false; items.len()];
+        let mut put = |grid: &mut Vec<bool>, k: usize, x: u32, y: u32, placed: &mut Vec<bool>| {
+            let (i, w, h, r) = items[k];
+            for yy in y..y + h {
+                for xx in x..x + w {
+                    grid[(yy * w0 + xx) as usize] = true;
+                }
+            }
+            placed[k] = true;
+            out.placements[i] = at(mi, x, y, r);
+        };
+        let mut k = 0;
+        while k < items.len() {
+            let (_, w, h, _) = items[k];
+            // bottom-left: lowest y, then lowest x
+            let pos = (0..h0)
+                .flat_map(|y| (0..w0).map(move |x| (x, y)))
+                .find(|&(x, y)| fits(&grid, x, y, w, h));
+            match pos {
+                Some((x, 0)) => put(&mut grid, k, x, 0, &mut placed),
+                _ => break,
+            }
+            k += 1;
+        }
+        for j in (k..items.len()).rev() {
+            let (_, w, h, _) = items[j];
+            // left-bottom: lowest x, then lowest y
+            let pos = (0..w0)
+                .flat_map(|x| (0..h0).map(move |y| (x, y)))
+                .find(|&(x, y)| fits(&grid, x, y, w, h));
+            if let Some((x, y)) = pos {
+                put(&mut grid, j, x, y, &mut placed);
+            }
+        }
+        out.macro_sizes.push((w0, h0));
+        items = items
+            .into_iter()
+            .zip(placed)
+            .filter(|(_, p)| !p)
+            .map(|(r, _)| r)
+            .collect();
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    #[test]
+    fn packing_positions_equal_the_brute_force_rules(
+        sizes in prop::collection::vec((1u32..=12, 1u32..=12), 1..30),
+        max_log in 4u32..7,
+    ) {
+        let max = 1 << max_log;
+        prop_assert_eq!(pack_rects(&sizes, &opts(max)).unwrap(), brute_pack(&sizes, max));
+    }
+}

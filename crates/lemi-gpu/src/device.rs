@@ -1,0 +1,271 @@
+//! Device setup: finds an adapter (a real GPU, or Mesa's lavapipe/llvmpipe software rasterizers),
+//! honouring `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` / `WGPU_POWER_PREF`, and opens a device with the
+//! adapter's own limits so that large buffers are allowed. With no adapter, one clear error says what
+//! to install (DESIGN.md, "Rendering: wgpu").
+
+use std::fmt;
+
+use thiserror::Error;
+
+/// Everything that can go wrong on the GPU side.
+#[derive(Debug, Error)]
+pub enum GpuError {
+    /// No adapter for the requested backends; the message says what to install.
+    #[error("{0}")]
+    NoAdapter(String),
+    #[error("could not open a device on adapter {adapter}: {message}")]
+    Device { adapter: String, message: String },
+    /// A validation or out-of-memory error reported by wgpu while doing `what`.
+    #[error("GPU error while {what}: {message}")]
+    Wgpu { what: String, message: String },
+    /// A request the adapter cannot satisfy (image too large, …).
+    #[error("{0}")]
+    Limit(String),
+    /// Invalid input data (bad texture size, material index out of range, bad lighting, …).
+    #[error("{0}")]
+    Invalid(String),
+    #[error("reading the rendered image back failed: {0}")]
+    Readback(String),
+}
+
+/// Which wgpu backend to use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BackendChoice {
+    /// `WGPU_BACKEND` if set (wgpu's own parser: `vulkan`, `gl`, `metal`, `dx12`, comma lists), else
+    /// the primary backends (Vulkan, Metal, DX12) and then GL.
+    #[default]
+    Auto,
+    Vulkan,
+    Gl,
+    Metal,
+    Dx12,
+}
+
+impl BackendChoice {
+    /// Parses `auto`, `vulkan`/`vk`, `gl`/`gles`/`opengl`, `metal`, `dx12`.
+    pub fn parse(s: &str) -> Result<BackendChoice, GpuError> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(BackendChoice::Auto),
+            "vulkan" | "vk" => Ok(BackendChoice::Vulkan),
+            "gl" | "gles" | "opengl" => Ok(BackendChoice::Gl),
+            "metal" | "mtl" => Ok(BackendChoice::Metal),
+            "dx12" | "d3d12" => Ok(BackendChoice::Dx12),
+            other => Err(GpuError::Invalid(format!(
+                "unknown backend `{other}`: expected auto, vulkan, gl, metal or dx12"
+            ))),
+        }
+    }
+
+    /// The backend sets to try, in order.
+    fn attempts(self) -> Vec<wgpu::Backends> {
+        match self {
+            BackendChoice::Auto => match wgpu::Backends::from_env() {
+                Some(b) => vec![b],
+                None => vec![wgpu::Backends::PRIMARY, wgpu::Backends::GL],
+            },
+            BackendChoice::Vulkan => vec![wgpu::Backends::VULKAN],
+            BackendChoice::Gl => vec![wgpu::Backends::GL],
+            BackendChoice::Metal => vec![wgpu::Backends::METAL],
+            BackendChoice::Dx12 => vec![wgpu::Backends::DX12],
+        }
+    }
+}
+
+impl fmt::Display for BackendChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = match self {
+            BackendChoice::Auto => match std::env::var("WGPU_BACKEND") {
+                Ok(v) => return write!(f, "WGPU_BACKEND={v}"),
+                Err(_) => "auto (Vulkan/Metal/DX12, then GL)",
+            },
+            BackendChoice::Vulkan => "vulkan",
+            BackendChoice::Gl => "gl",
+            BackendChoice::Metal => "metal",
+            BackendChoice::Dx12 => "dx12",
+        };
+        f.write_str(s)
+    }
+}
+
+/// The one error message for a machine without a usable adapter. `tried` names the backends tried.
+pub fn no_adapter_message(tried: &str) -> String {
+    format!(
+        "no GPU adapter found (backends tried: {tried}). lemi renders with wgpu and needs a GPU driver \
+         or Mesa's software rasterizers: install `mesa-vulkan-drivers` (Vulkan via lavapipe) or Mesa's \
+         EGL/GL (`libegl1 libgl1-mesa-dri`, GL via llvmpipe), e.g. `apt-get install \
+         mesa-vulkan-drivers libegl1 libgl1-mesa-dri`; or choose another backend with \
+         WGPU_BACKEND=vulkan|gl (or `--backend`)"
+    )
+}
+
+/// An open device and its queue.
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    info: wgpu::AdapterInfo,
+    pub(crate) layouts: crate::shading::Layouts,
+}
+
+impl fmt::Debug for Gpu {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Gpu")
+            .field("adapter", &self.describe())
+            .finish()
+    }
+}
+
+impl Gpu {
+    /// Finds an adapter for `choice` and opens a device with the adapter's limits.
+    pub fn new(choice: BackendChoice) -> Result<Gpu, GpuError> {
+        pollster::block_on(Self::new_async(choice))
+    }
+
+    async fn new_async(choice: BackendChoice) -> Result<Gpu, GpuError> {
+        let wanted_name = std::env::var("WGPU_ADAPTER_NAME")
+            .ok()
+            .map(|s| s.to_lowercase());
+        let mut seen = Vec::new();
+        for backends in choice.attempts() {
+            if backends.is_empty() {
+                continue;
+            }
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+            desc.backends = backends;
+            let instance = wgpu::Instance::new(desc);
+            let adapter = match &wanted_name {
+                Some(name) => {
+                    let adapters = instance.enumerate_adapters(backends).await;
+                    for a in &adapters {
+                        seen.push(a.get_info().name);
+                    }
+                    adapters
+                        .into_iter()
+                        .find(|a| a.get_info().name.to_lowercase().contains(name.as_str()))
+                }
+                None => instance
+                    .request_adapter(&wgpu::RequestAdapterOptions {
+                        power_preference: wgpu::PowerPreference::from_env().unwrap_or_default(),
+                        force_fallback_adapter: false,
+                        compatible_surface: None,
+                        ..Default::default()
+                    })
+                    .await
+                    .ok(),
+            };
+            let Some(adapter) = adapter else { continue };
+            let info = adapter.get_info();
+            let (device, queue) = adapter
+                .request_device(&wgpu::DeviceDescriptor {
+                    label: Some("lemi"),
+                    required_features: wgpu::Features::empty(),
+                    required_limits: adapter.limits(),
+                    ..Default::default()
+                })
+                .await
+                .map_err(|e| GpuError::Device {
+                    adapter: format!("{} ({:?})", info.name, info.backend),
+                    message: e.to_string(),
+                })?;
+            let layouts = crate::shading::Layouts::new(&device);
+            return Ok(Gpu {
+                device,
+                queue,
+                info,
+                layouts,
+            });
+        }
+        if let Some(name) = wanted_name {
+            return Err(GpuError::NoAdapter(format!(
+                "WGPU_ADAPTER_NAME={name} matches none of the adapters found ({}); {}",
+                if seen.is_empty() {
+                    "none".to_string()
+                } else {
+                    seen.join(", ")
+                },
+                no_adapter_message(&choice.to_string())
+            )));
+        }
+        Err(GpuError::NoAdapter(no_adapter_message(&choice.to_string())))
+    }
+
+    /// The adapter's description.
+    pub fn info(&self) -> &wgpu::AdapterInfo {
+        &self.info
+    }
+
+    /// `"llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)"`: adapter name, backend and type.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?})",
+            self.info.name, self.info.backend, self.info.device_type
+        )
+    }
+
+    /// The device's limits.
+    pub fn limits(&self) -> wgpu::Limits {
+        self.device.limits()
+    }
+
+    /// The bind group layouts of the shared shading module (group 0: globals, group 1: material).
+    pub fn globals_layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layouts.globals
+    }
+
+    pub fn material_layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layouts.material
+    }
+
+    /// Runs `f` inside validation and out-of-memory error scopes and turns a captured error into a
+    /// [`GpuError::Wgpu`] naming `what`.
+    pub fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let v = pollster::block_on(validation.pop());
+        let o = pollster::block_on(oom.pop());
+        match v.or(o) {
+            Some(e) => Err(GpuError::Wgpu {
+                what: what.to_string(),
+                message: e.to_string(),
+            }),
+            None => Ok(out),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_adapter_message_says_what_to_install() {
+        let m = no_adapter_message("vulkan");
+        assert!(m.starts_with("no GPU adapter found (backends tried: vulkan)"));
+        for needle in [
+            "mesa-vulkan-drivers",
+            "lavapipe",
+            "libegl1 libgl1-mesa-dri",
+            "llvmpipe",
+            "WGPU_BACKEND",
+        ] {
+            assert!(m.contains(needle), "missing {needle}: {m}");
+        }
+        assert_eq!(
+            GpuError::NoAdapter(m.clone()).to_string(),
+            m,
+            "the error shows the message unchanged"
+        );
+    }
+
+    #[test]
+    fn backend_names_parse() {
+        assert_eq!(
+            BackendChoice::parse("Vulkan").ok(),
+            Some(BackendChoice::Vulkan)
+        );
+        assert_eq!(BackendChoice::parse("gl").ok(), Some(BackendChoice::Gl));
+        assert_eq!(BackendChoice::parse("auto").ok(), Some(BackendChoice::Auto));
+        let e = BackendChoice::parse("glide").err().map(|e| e.to_string());
+        assert!(e.is_some_and(|e| e.contains("glide") && e.contains("vulkan")));
+    }
+}

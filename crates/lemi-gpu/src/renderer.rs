@@ -1,0 +1,445 @@
+//! The reference renderer: draws a [`GpuScene`] from a [`View`] into an sRGB colour image and a
+//! linear depth image, and reads both back. It is the ground truth impostors are compared with.
+//!
+//! One pass, no MSAA (comparisons want exact texels), no back-face culling (polygon soups), reverse-Z
+//! depth test (`Greater`, cleared to 0; see `lemi_core::camera`), shading from the shared module
+//! ([`crate::shading`]). A second colour target stores the view depth (distance along the view axis)
+//! as `R32Float`, so the depth image is linear on every backend. Readback pads rows to wgpu's
+//! 256-byte `COPY_BYTES_PER_ROW_ALIGNMENT`.
+
+use std::sync::Mutex;
+
+use lemi_core::camera::View;
+
+use crate::scene::GpuScene;
+use crate::shading::{vertex_layout, Lighting, ShadingGlobals, SHADING_WGSL};
+use crate::{Gpu, GpuError};
+
+/// The colour target format: linear shading output, encoded to sRGB on store.
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// The linear view-depth target format: the bits of an f32 (`R32Float` is not renderable on every
+/// backend, `R32Uint` is).
+pub const VIEW_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+/// The depth buffer format (reverse-Z).
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+const RENDER_WGSL: &str = include_str!("render.wgsl");
+
+/// Per-frame options.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    pub lighting: Lighting,
+    /// sRGB-encoded RGBA written where no geometry was drawn (default transparent black).
+    pub clear: [u8; 4],
+    /// Fragments whose albedo alpha is below this are discarded (0, the default, keeps all).
+    pub alpha_cutoff: f32,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            lighting: Lighting::default(),
+            clear: [0, 0, 0, 0],
+            alpha_cutoff: 0.0,
+        }
+    }
+}
+
+/// A rendered image, rows top to bottom.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// sRGB-encoded RGBA8; alpha 255 where geometry was drawn, the clear colour elsewhere.
+    pub rgba: Vec<u8>,
+    /// Linear view-space distance along the view axis; `f32::INFINITY` for background.
+    pub depth: Vec<f32>,
+}
+
+impl Frame {
+    /// RGBA of pixel `(x, y)`; `None` outside the image.
+    pub fn pixel(&self, x: u32, y: u32) -> Option<[u8; 4]> {
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        let i = 4 * (y as usize * self.width as usize + x as usize);
+        self.rgba.get(i..i + 4).and_then(|s| s.try_into().ok())
+    }
+
+    /// Depth of pixel `(x, y)`; `None` outside the image.
+    pub fn depth_at(&self, x: u32, y: u32) -> Option<f32> {
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        self.depth
+            .get(y as usize * self.width as usize + x as usize)
+            .copied()
+    }
+
+    /// Pixels where geometry was drawn.
+    pub fn covered_count(&self) -> usize {
+        self.depth.iter().filter(|d| d.is_finite()).count()
+    }
+}
+
+struct Targets {
+    width: u32,
+    height: u32,
+    color: wgpu::Texture,
+    view_depth: wgpu::Texture,
+    depth: wgpu::Texture,
+    color_readback: wgpu::Buffer,
+    depth_readback: wgpu::Buffer,
+}
+
+/// Bytes per row padded to `COPY_BYTES_PER_ROW_ALIGNMENT` (256).
+pub fn padded_bytes_per_row(width: u32, bytes_per_texel: u32) -> u32 {
+    let unpadded = width * bytes_per_texel;
+    let align = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    unpadded.div_ceil(align) * align
+}
+
+/// The reference renderer: pipeline, globals and cached render targets.
+pub struct Renderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::RenderPipeline,
+    globals: wgpu::Buffer,
+    globals_group: wgpu::BindGroup,
+    max_dim: u32,
+    targets: Mutex<Option<Targets>>,
+}
+
+impl Renderer {
+    pub fn new(gpu: &Gpu) -> Result<Renderer, GpuError> {
+        gpu.scoped("creating the reference render pipeline", || {
+            let device = &gpu.device;
+            let source = format!("{SHADING_WGSL}\n{RENDER_WGSL}");
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi reference renderer"),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi reference renderer"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
+                immediate_size: 0,
+            });
+            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("lemi reference renderer"),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[
+                        Some(wgpu::ColorTargetState {
+                            format: COLOR_FORMAT,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        }),
+                        Some(wgpu::ColorTargetState {
+                            format: VIEW_DEPTH_FORMAT,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        }),
+                    ],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            let globals = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lemi globals"),
+                size: std::mem::size_of::<ShadingGlobals>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let globals_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lemi globals"),
+                layout: gpu.globals_layout(),
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: globals.as_entire_binding(),
+                }],
+            });
+            Renderer {
+                device: gpu.device.clone(),
+                queue: gpu.queue.clone(),
+                pipeline,
+                globals,
+                globals_group,
+                max_dim: gpu.limits().max_texture_dimension_2d,
+                targets: Mutex::new(None),
+            }
+        })
+    }
+
+    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let v = pollster::block_on(validation.pop());
+        let o = pollster::block_on(oom.pop());
+        match v.or(o) {
+            Some(e) => Err(GpuError::Wgpu {
+                what: what.to_string(),
+                message: e.to_string(),
+            }),
+            None => Ok(out),
+        }
+    }
+
+    fn make_targets(&self, width: u32, height: u32) -> Targets {
+        let size = wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        };
+        let tex = |label: &str, format, usage| {
+            self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+        let readback = |label: &str, bpt: u32| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: padded_bytes_per_row(width, bpt) as u64 * height as u64,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        Targets {
+            width,
+            height,
+            color: tex("lemi colour", COLOR_FORMAT, rt),
+            view_depth: tex("lemi view depth", VIEW_DEPTH_FORMAT, rt),
+            depth: tex(
+                "lemi depth",
+                DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            ),
+            color_readback: readback("lemi colour readback", 4),
+            depth_readback: readback("lemi depth readback", 4),
+        }
+    }
+
+    /// Renders `scene` from `view` and reads the colour and depth images back.
+    pub fn render(
+        &self,
+        scene: &GpuScene,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<Frame, GpuError> {
+        let (width, height) = (view.width, view.height);
+        if width == 0 || height == 0 || width > self.max_dim || height > self.max_dim {
+            return Err(GpuError::Limit(format!(
+                "image size {width}x{height} is outside what this adapter renders (1..={} per side)",
+                self.max_dim
+            )));
+        }
+        let globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
+        let mut guard = self
+            .targets
+            .lock()
+            .map_err(|_| GpuError::Readback("render target cache poisoned".into()))?;
+        if guard
+            .as_ref()
+            .is_none_or(|t| t.width != width || t.height != height)
+        {
+            *guard = Some(self.scoped("creating render targets", || {
+                self.make_targets(width, height)
+            })?);
+        }
+        let Some(targets) = guard.as_ref() else {
+            return Err(GpuError::Readback("render targets missing".into()));
+        };
+        for chunk in scene.geometry.chunks() {
+            if scene.materials.bind_group(chunk.material).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "geometry uses material {} but only {} materials were uploaded",
+                    chunk.material,
+                    scene.materials.len()
+                )));
+            }
+        }
+        self.scoped("rendering", || {
+            self.queue
+                .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+            let mut encoder = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("lemi render"),
+                });
+            let color_view = targets.color.create_view(&Default::default());
+            let vdepth_view = targets.view_depth.create_view(&Default::default());
+            let depth_view = targets.depth.create_view(&Default::default());
+            {
+                let clear = wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                };
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("lemi reference pass"),
+                    color_attachments: &[
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &color_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &vdepth_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                    ],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(0.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.globals_group, &[]);
+                let mut bound = None;
+                for chunk in scene.geometry.chunks() {
+                    if bound != Some(chunk.material) {
+                        if let Some(g) = scene.materials.bind_group(chunk.material) {
+                            pass.set_bind_group(1, g, &[]);
+                        }
+                        bound = Some(chunk.material);
+                    }
+                    pass.set_vertex_buffer(0, chunk.vertices.slice(..));
+                    pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..chunk.index_count, 0, 0..1);
+                }
+            }
+            for (texture, buffer) in [
+                (&targets.color, &targets.color_readback),
+                (&targets.view_depth, &targets.depth_readback),
+            ] {
+                encoder.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyBufferInfo {
+                        buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded_bytes_per_row(width, 4)),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
+            self.queue.submit([encoder.finish()]);
+        })?;
+        let rgba = self.read_rows(&targets.color_readback, width, height)?;
+        let depth_bytes = self.read_rows(&targets.depth_readback, width, height)?;
+        let mut depth: Vec<f32> = depth_bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        let mut rgba = rgba;
+        // The depth target is cleared to 0; the colour alpha (255 where a fragment was written, 0
+        // after the clear) tells geometry from background.
+        for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
+            if px[3] == 0 {
+                px.copy_from_slice(&options.clear);
+                *d = f32::INFINITY;
+            }
+        }
+        Ok(Frame {
+            width,
+            height,
+            rgba,
+            depth,
+        })
+    }
+
+    /// Maps a readback buffer and strips the row padding (4 bytes per texel).
+    fn read_rows(
+        &self,
+        buffer: &wgpu::Buffer,
+        width: u32,
+        height: u32,
+    ) -> Result<Vec<u8>, GpuError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let padded = padded_bytes_per_row(width, 4) as usize;
+        let row = width as usize * 4;
+        let mut out = Vec::with_capacity(row * height as usize);
+        {
+            let view = buffer
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            for r in view.chunks(padded).take(height as usize) {
+                out.extend_from_slice(&r[..row]);
+            }
+        }
+        buffer.unmap();
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_pad_to_256_bytes() {
+        assert_eq!(padded_bytes_per_row(1, 4), 256);
+        assert_eq!(padded_bytes_per_row(64, 4), 256);
+        assert_eq!(padded_bytes_per_row(65, 4), 512);
+        assert_eq!(padded_bytes_per_row(1280, 4), 5120);
+    }
+}

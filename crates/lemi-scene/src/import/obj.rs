@@ -1,0 +1,189 @@
+//! Wavefront OBJ + MTL reader on top of `tobj` (faces triangulated, one index per vertex), based on
+//! the Wavefront OBJ and MTL specifications (Appendix B1/B2 of the Advanced Visualizer manual).
+//!
+//! Materials: `Kd` becomes the base colour factor and `map_Kd` the base colour texture, resolved
+//! relative to the MTL file's directory (then the OBJ's). A missing or unreadable MTL library or
+//! texture is a warning (counted in [`ImportReport`]), not an error. Texture coordinates are flipped
+//! to a top-left origin (`v → 1 − v`) to match the row order of [`lemi_core::Texture`]. Vertex
+//! colours (`v x y z r g b`) are taken as sRGB-encoded 0..1 values and converted to linear.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use lemi_core::{Material, Mesh, SceneBuilder, Vertex};
+
+use super::{decode_texture, malformed, read_file, srgb8_to_linear8, ImportReport};
+use crate::{LoadOptions, SceneError};
+
+pub(super) fn load(
+    path: &Path,
+    options: &LoadOptions,
+    builder: &mut SceneBuilder,
+    report: &mut ImportReport,
+) -> Result<(), SceneError> {
+    let bytes = read_file(path)?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    // Directories of the MTL libraries tobj asked for, to resolve texture paths.
+    let mtl_dirs: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+    let mtl_errors: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    let tobj_options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, materials) =
+        tobj::load_obj_buf(&mut bytes.as_slice(), &tobj_options, |mtl_path| {
+            let full = dir.join(mtl_path);
+            if let Ok(mut d) = mtl_dirs.lock() {
+                d.push(full.parent().map(Path::to_path_buf).unwrap_or_default());
+            }
+            let r = tobj::load_mtl(&full);
+            if let (Err(e), Ok(mut errs)) = (&r, mtl_errors.lock()) {
+                errs.push(format!("material library {}: {e}", full.display()));
+            }
+            r
+        })
+        .map_err(|e| malformed(path, format!("OBJ: {e}")))?;
+    let mut dirs = mtl_dirs.into_inner().unwrap_or_default();
+    dirs.push(dir.clone());
+    for e in mtl_errors.into_inner().unwrap_or_default() {
+        report.warn(path, e);
+    }
+    let materials = match materials {
+        Ok(m) => m,
+        Err(e) => {
+            report.missing_materials += 1;
+            report.warn(
+                path,
+                format!("materials not loaded ({e}); using the default material"),
+            );
+            Vec::new()
+        }
+    };
+
+    // Scene materials, created on first use; `None` key is the file's default material.
+    let mut material_map: HashMap<Option<usize>, u32> = HashMap::new();
+    let mut texture_cache: HashMap<PathBuf, Option<u32>> = HashMap::new();
+    for model in models {
+        let m = model.mesh;
+        let nverts = m.positions.len() / 3;
+        if nverts == 0 || m.indices.is_empty() {
+            continue;
+        }
+        let key = m.material_id.filter(|&i| i < materials.len());
+        let material = match material_map.get(&key) {
+            Some(&id) => id,
+            None => {
+                let mat = match key {
+                    Some(i) => {
+                        let src = &materials[i];
+                        let kd = src.diffuse.unwrap_or([0.8, 0.8, 0.8]);
+                        let texture = src.diffuse_texture.as_deref().and_then(|t| {
+                            texture(path, t, &dirs, builder, report, &mut texture_cache)
+                        });
+                        Material {
+                            name: src.name.clone(),
+                            base_color: [kd[0], kd[1], kd[2], src.dissolve.unwrap_or(1.0)],
+                            texture,
+                        }
+                    }
+                    None => Material::default(),
+                };
+                let id = builder.add_material(mat);
+                material_map.insert(key, id);
+                id
+            }
+        };
+        let mut vertices = Vec::with_capacity(nverts);
+        for i in 0..nverts {
+            let p = [
+                m.positions[3 * i],
+                m.positions[3 * i + 1],
+                m.positions[3 * i + 2],
+            ];
+            let n = if m.normals.len() >= 3 * (i + 1) {
+                [m.normals[3 * i], m.normals[3 * i + 1], m.normals[3 * i + 2]]
+            } else {
+                [0.0; 3]
+            };
+            let uv = if m.texcoords.len() >= 2 * (i + 1) {
+                [m.texcoords[2 * i], 1.0 - m.texcoords[2 * i + 1]]
+            } else {
+                [0.0; 2]
+            };
+            let color = if m.vertex_color.len() >= 3 * (i + 1) {
+                let c = |x: f32| srgb8_to_linear8((x * 255.0).round().clamp(0.0, 255.0) as u8);
+                [
+                    c(m.vertex_color[3 * i]),
+                    c(m.vertex_color[3 * i + 1]),
+                    c(m.vertex_color[3 * i + 2]),
+                    255,
+                ]
+            } else {
+                [255; 4]
+            };
+            vertices.push(Vertex::new(
+                options.up.to_y_up(p),
+                options.up.to_y_up(n),
+                uv,
+                color,
+            ));
+        }
+        let mut indices = m.indices;
+        indices.truncate(indices.len() / 3 * 3);
+        builder.add_mesh(Mesh {
+            material,
+            vertices,
+            indices,
+        });
+    }
+    Ok(())
+}
+
+/// Loads a `map_Kd` texture (once per file), or warns and returns `None`.
+fn texture(
+    obj: &Path,
+    spec: &str,
+    dirs: &[PathBuf],
+    builder: &mut SceneBuilder,
+    report: &mut ImportReport,
+    cache: &mut HashMap<PathBuf, Option<u32>>,
+) -> Option<u32> {
+    // `map_Kd` may carry options before the file name (`-s 1 1 1 file.png`); try the whole
+    // value first, then its last word.
+    let mut names = vec![spec.trim().to_string()];
+    if let Some(last) = spec.split_ascii_whitespace().last() {
+        names.push(last.to_string());
+    }
+    let found = names
+        .iter()
+        .flat_map(|n| dirs.iter().map(move |d| d.join(n.replace('\\', "/"))))
+        .find(|p| p.is_file());
+    let Some(file) = found else {
+        report.missing_textures += 1;
+        report.warn(obj, format!("texture `{spec}` not found"));
+        return None;
+    };
+    if let Some(&t) = cache.get(&file) {
+        return t;
+    }
+    let result = match std::fs::read(&file) {
+        Ok(bytes) => match decode_texture(file.display().to_string(), &bytes) {
+            Ok(tex) => Some(builder.add_texture(tex)),
+            Err(e) => {
+                report.missing_textures += 1;
+                report.warn(obj, format!("texture {}: {e}", file.display()));
+                None
+            }
+        },
+        Err(e) => {
+            report.missing_textures += 1;
+            report.warn(obj, format!("texture {}: {e}", file.display()));
+            None
+        }
+    };
+    cache.insert(file, result);
+    result
+}
