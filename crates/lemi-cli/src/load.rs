@@ -56,8 +56,11 @@ pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)>
         })),
     };
     let t = Instant::now();
-    let scene = lemi_scene::load(&args.scenes, &options)
+    let (scene, report) = lemi_scene::import::load_with_report(&args.scenes, &options)
         .with_context(|| format!("loading {}", args.scenes.join(" ")))?;
     bar.finish_and_clear();
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
     Ok((scene, t.elapsed().as_secs_f64()))
 }

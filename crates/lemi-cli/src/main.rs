@@ -1,6 +1,7 @@
 //! `lemi`: the command-line front end. Each subcommand lives in its own `cmd_*.rs` file with an
 //! `Args` struct and a `run` function; the libraries do the work.
 
+mod cmd_demo;
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
@@ -18,6 +19,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The main job on the built-in default scene: placement, reference and cube-face renders.
+    Demo(cmd_demo::Args),
     /// Print triangle/material counts, bounds and import statistics of a scene.
     Info(cmd_info::Args),
     /// Render a scene from a camera with the GPU reference renderer.
@@ -29,12 +32,30 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(a) => cmd_demo::run(a),
         Command::Info(a) => cmd_info::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", error_chain(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes joined by `: `, leaving out a cause whose text the message already
+/// shows (library errors often include their source in their own message).
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if msg.contains(&text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&text);
+    }
+    msg
 }

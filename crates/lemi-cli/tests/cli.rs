@@ -1,0 +1,151 @@
+//! End-to-end tests of the `lemi` binary: real scenes in, real files out, and clear errors (never a
+//! panic) for bad input.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn lemi(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lemi"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("the lemi binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("lemi-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn assert_clean_error(o: &Output, needle: &str) {
+    let e = stderr(o);
+    assert!(!o.status.success(), "expected failure, stderr: {e}");
+    assert!(!e.contains("panicked"), "panic: {e}");
+    assert!(e.contains(needle), "error should mention `{needle}`: {e}");
+}
+
+#[test]
+fn info_json_has_counts_and_bounds() {
+    let o = lemi(&["info", "builtin:city:20k:3", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let tris = v["triangles"].as_u64().unwrap();
+    assert!((18_000..=22_000).contains(&tris), "{tris}");
+    let min = v["bounds"]["min"].as_array().unwrap();
+    let max = v["bounds"]["max"].as_array().unwrap();
+    assert_eq!(min.len(), 3);
+    assert!(max[0].as_f64().unwrap() > min[0].as_f64().unwrap());
+    assert_eq!(min[1].as_f64().unwrap(), 0.0, "city ground at y = 0");
+}
+
+#[test]
+fn info_rejects_bad_inputs_by_name() {
+    assert_clean_error(
+        &lemi(&["info", "/nonexistent/scene.glb"]),
+        "/nonexistent/scene.glb",
+    );
+    assert_clean_error(&lemi(&["info", "builtin:castle"]), "castle");
+    assert_clean_error(&lemi(&["info", "builtin:city:0"]), "city:0");
+    let d = tmp("garbage");
+    let p = d.join("bad.ply");
+    std::fs::write(
+        &p,
+        b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n",
+    )
+    .unwrap();
+    assert_clean_error(&lemi(&["info", p.to_str().unwrap()]), "bad.ply");
+    let o = lemi(&["info", "builtin:city:20k", "--up", "x"]);
+    assert_clean_error(&o, "--up");
+}
+
+#[test]
+fn render_writes_an_image_of_the_requested_size() {
+    let d = tmp("render");
+    let out = d.join("city.png");
+    let o = lemi(&[
+        "render",
+        "builtin:city:20k",
+        "--eye",
+        "0,1.7,0",
+        "--look",
+        "100,5,0",
+        "--size",
+        "160x90",
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&out).unwrap().to_rgba8();
+    assert_eq!(img.dimensions(), (160, 90));
+    let covered = img.pixels().filter(|p| p[3] == 255).count();
+    assert!(
+        covered > 160 * 90 / 4,
+        "the street view shows geometry: {covered}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["covered_pixels"].as_u64().unwrap() as usize, covered);
+}
+
+#[test]
+fn render_rejects_absurd_flags() {
+    let d = tmp("render-bad");
+    let out = d.join("x.png");
+    let o = out.to_str().unwrap();
+    assert_clean_error(
+        &lemi(&["render", "builtin:city:20k", "--size", "0x10", "-o", o]),
+        "--size",
+    );
+    assert_clean_error(
+        &lemi(&["render", "builtin:city:20k", "--eye", "nan,0,0", "-o", o]),
+        "--eye",
+    );
+    assert_clean_error(
+        &lemi(&["render", "builtin:city:20k", "--fov", "200", "-o", o]),
+        "fov",
+    );
+    assert!(!out.exists(), "nothing written on error");
+}
+
+#[test]
+fn layers_reproduces_the_paper_and_rejects_bad_parameters() {
+    let o = lemi(&[
+        "layers",
+        "--cell",
+        "10",
+        "--resolution",
+        "512",
+        "--layers",
+        "64",
+        "--alpha-deg",
+        "0.1",
+        "--2d",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let nf = v["near_field"].as_f64().unwrap();
+    assert!(
+        (nf - 42.0).abs() < 1.0,
+        "GI 2002: 64 layers -> 42 m, got {nf}"
+    );
+    let layers = v["layers"].as_array().unwrap();
+    assert_eq!(layers.len(), 64);
+    for k in ["distance", "near_border", "far_border", "bound_by"] {
+        assert!(layers[1].get(k).is_some(), "layer field {k}");
+    }
+    assert_clean_error(
+        &lemi(&["layers", "--cell", "10", "--layers", "0"]),
+        "--layers",
+    );
+    assert_clean_error(&lemi(&["layers", "--cell", "-1", "--layers", "4"]), "cell");
+    assert_clean_error(
+        &lemi(&["layers", "--cell", "10", "--near-field", "3"]),
+        "near",
+    );
+}
