@@ -20,12 +20,14 @@
 //! ```
 
 mod device;
+pub mod recorder;
 mod renderer;
 mod scene;
 pub mod shading;
 pub mod texture;
 
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
+pub use recorder::{LayerFrame, LayerRecorder, MaterialRun};
 pub use renderer::{
     padded_bytes_per_row, Frame, RenderOptions, Renderer, COLOR_FORMAT, DEPTH_FORMAT,
     VIEW_DEPTH_FORMAT,

@@ -1,0 +1,531 @@
+//! The crack-free layer recorder: draws the triangles of one slab (already clipped to the slab with
+//! [`lemi_core::clip::clip_to_slab`], positions relative to the cell centre) into one `Res × Res`
+//! cube-face layer: sRGB RGBA with binary alpha and the linear depth along the face axis per texel.
+//!
+//! Based on the TR on the error metric (Jeschke, Wimmer, TR-186-2-02-04, sec. 2.2): a polygon
+//! crossing a slab border is cut there and both layers record their part; a texel only partly
+//! covered by each part would be lost in both, so coverage is **conservative**: every texel whose
+//! square the projected triangle touches at all is covered. This uses overestimated conservative
+//! rasterization by triangle dilation in the vertex shader (Hasselgren, Akenine-Möller, Ohlsson,
+//! "Conservative Rasterization", GPU Gems 2, ch. 42): each vertex carries its whole triangle
+//! (non-indexed draw; no geometry shader or storage buffer, so it runs on GL/llvmpipe and
+//! Vulkan/lavapipe), the vertex shader moves every edge outward by half a texel diagonal and
+//! intersects adjacent moved edges; the fragment shader keeps exactly the texels whose
+//! square overlaps the projected triangle (separating axes: the box axes and the edge normals).
+//! Triangles degenerate in projection (edge-on) are drawn as a triangle around their grown bounding
+//! box, and the same fragment test keeps the texels their segment touches.
+//!
+//! Shading is the shared module ([`crate::shading`]). Moved corners carry their barycentric
+//! coordinates with respect to the original triangle; the fragment shader clamps them to the
+//! triangle, so texels inside get the original interpolation and the overshoot the nearest values
+//! on the triangle (colours, normals and UVs are never extrapolated).
+//!
+//! Depth test: nearest wins (reverse-Z, `Greater`); an overshoot fragment (texel centre outside its
+//! triangle) is pushed back by a relative 2⁻¹⁶ in the depth buffer, so along a shared edge the
+//! triangle containing the texel centre wins, as in the reference renderer.
+
+use std::sync::Mutex;
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+use lemi_core::camera::View;
+use lemi_core::clip::ClipVertex;
+use lemi_core::Face;
+use wgpu::util::DeviceExt;
+
+use crate::renderer::{padded_bytes_per_row, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
+use crate::shading::{Lighting, ShadingGlobals, SHADING_WGSL};
+use crate::{Gpu, GpuError, GpuMaterials};
+
+const RECORDER_WGSL: &str = include_str!("recorder.wgsl");
+
+/// Triangles `first .. first + count` (triangle indices, not vertex indices) use `material`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MaterialRun {
+    pub material: u32,
+    pub first: u32,
+    pub count: u32,
+}
+
+/// One recorded layer, rows top to bottom in the texel convention of [`lemi_core::face`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerFrame {
+    pub res: u32,
+    /// sRGB-encoded RGBA8; alpha 255 where covered, `[0, 0, 0, 0]` elsewhere.
+    pub rgba: Vec<u8>,
+    /// Linear depth along the face axis; `f32::INFINITY` where not covered.
+    pub depth: Vec<f32>,
+}
+
+impl LayerFrame {
+    /// Whether texel `(i, j)` is covered (`false` outside the image).
+    pub fn covered(&self, i: u32, j: u32) -> bool {
+        i < self.res
+            && j < self.res
+            && self
+                .rgba
+                .get(4 * (j as usize * self.res as usize + i as usize) + 3)
+                .is_some_and(|&a| a == 255)
+    }
+
+    /// RGBA of texel `(i, j)`; `None` outside the image.
+    pub fn texel(&self, i: u32, j: u32) -> Option<[u8; 4]> {
+        if i >= self.res || j >= self.res {
+            return None;
+        }
+        let k = 4 * (j as usize * self.res as usize + i as usize);
+        self.rgba.get(k..k + 4).and_then(|s| s.try_into().ok())
+    }
+
+    /// Number of covered texels.
+    pub fn covered_count(&self) -> usize {
+        self.rgba.chunks_exact(4).filter(|p| p[3] == 255).count()
+    }
+}
+
+/// The recorder's vertex: the whole triangle (the three corners' positions and shading attributes,
+/// in triangle order) and which corner this vertex is. 148 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+struct RecVertex {
+    positions: [[f32; 3]; 3],
+    corner: u32,
+    normals: [[f32; 3]; 3],
+    uv01: [f32; 4],
+    uv2: [f32; 2],
+    colors: [[f32; 4]; 3],
+}
+
+const REC_ATTRIBUTES: [wgpu::VertexAttribute; 12] = wgpu::vertex_attr_array![
+    0 => Float32x3,
+    1 => Float32x3,
+    2 => Float32x3,
+    3 => Uint32,
+    4 => Float32x3,
+    5 => Float32x3,
+    6 => Float32x3,
+    7 => Float32x4,
+    8 => Float32x2,
+    9 => Float32x4,
+    10 => Float32x4,
+    11 => Float32x4,
+];
+
+struct Targets {
+    color: wgpu::Texture,
+    view_depth: wgpu::Texture,
+    depth: wgpu::Texture,
+    color_readback: wgpu::Buffer,
+    depth_readback: wgpu::Buffer,
+}
+
+/// Records layers of one resolution; pipeline and render targets are made once.
+pub struct LayerRecorder {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    pipeline: wgpu::RenderPipeline,
+    globals: wgpu::Buffer,
+    globals_group: wgpu::BindGroup,
+    res: u32,
+    targets: Mutex<Targets>,
+}
+
+impl LayerRecorder {
+    /// A recorder of `res × res` layers.
+    pub fn new(gpu: &Gpu, res: u32) -> Result<LayerRecorder, GpuError> {
+        let max_dim = gpu.limits().max_texture_dimension_2d;
+        if res == 0 || res > max_dim {
+            return Err(GpuError::Limit(format!(
+                "layer resolution {res} is outside what this adapter renders (1..={max_dim})"
+            )));
+        }
+        gpu.scoped("creating the layer recorder", || {
+            let device = &gpu.device;
+            let source = format!("{SHADING_WGSL}\n{RECORDER_WGSL}");
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi layer recorder"),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi layer recorder"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
+                immediate_size: 0,
+            });
+            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("lemi layer recorder"),
+                layout: Some(&layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<RecVertex>() as wgpu::BufferAddress,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &REC_ATTRIBUTES,
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[
+                        Some(wgpu::ColorTargetState {
+                            format: COLOR_FORMAT,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        }),
+                        Some(wgpu::ColorTargetState {
+                            format: VIEW_DEPTH_FORMAT,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::ALL,
+                        }),
+                    ],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            let globals = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lemi recorder globals"),
+                size: std::mem::size_of::<ShadingGlobals>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let globals_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lemi recorder globals"),
+                layout: gpu.globals_layout(),
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: globals.as_entire_binding(),
+                }],
+            });
+            LayerRecorder {
+                device: gpu.device.clone(),
+                queue: gpu.queue.clone(),
+                pipeline,
+                globals,
+                globals_group,
+                res,
+                targets: Mutex::new(make_targets(device, res)),
+            }
+        })
+    }
+
+    /// The layer resolution.
+    pub fn res(&self) -> u32 {
+        self.res
+    }
+
+    /// Records `triangles` (three vertices each, positions relative to `center`, already clipped to
+    /// the slab) seen along `face` from `center`, with the materials of `runs` and near plane
+    /// `near`. Triangles not named by any run are not drawn.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record(
+        &self,
+        materials: &GpuMaterials,
+        center: DVec3,
+        face: Face,
+        triangles: &[ClipVertex],
+        runs: &[MaterialRun],
+        near: f64,
+        lighting: &Lighting,
+    ) -> Result<LayerFrame, GpuError> {
+        if !center.is_finite() {
+            return Err(GpuError::Invalid(format!(
+                "layer centre must be finite, got {center:?}"
+            )));
+        }
+        if !(near.is_finite() && near > 0.0) {
+            return Err(GpuError::Invalid(format!(
+                "near plane must be finite and positive, got {near}"
+            )));
+        }
+        if triangles.len() % 3 != 0 {
+            return Err(GpuError::Invalid(format!(
+                "triangle vertices come in threes, got {}",
+                triangles.len()
+            )));
+        }
+        if let Some(i) = triangles.iter().position(|v| !v.rel.is_finite()) {
+            return Err(GpuError::Invalid(format!(
+                "triangle {} has a non-finite vertex position {:?}",
+                i / 3,
+                triangles[i].rel
+            )));
+        }
+        let tri_count = triangles.len() / 3;
+        for r in runs {
+            if materials.bind_group(r.material).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "a run uses material {} but only {} materials were uploaded",
+                    r.material,
+                    materials.len()
+                )));
+            }
+            if r.first as usize + r.count as usize > tri_count {
+                return Err(GpuError::Invalid(format!(
+                    "run of material {} covers triangles {}..{} but there are {tri_count}",
+                    r.material,
+                    r.first,
+                    r.first as u64 + r.count as u64
+                )));
+            }
+        }
+        // Vertices relative to the centre: the view's eye is the origin of that frame.
+        let view = View::cube_face(DVec3::ZERO, face, self.res, near);
+        let mut globals = ShadingGlobals::new(&view, lighting, 0.0)?;
+        globals.params[1] = self.res as f32;
+        globals.params[2] = near as f32;
+        let vertices = rec_vertices(triangles);
+        let targets = self
+            .targets
+            .lock()
+            .map_err(|_| GpuError::Readback("recorder target cache poisoned".into()))?;
+        self.scoped("recording a layer", || {
+            self.queue
+                .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+            let buffer = (!vertices.is_empty()).then(|| {
+                self.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("lemi recorder vertices"),
+                        contents: bytemuck::cast_slice(&vertices),
+                        usage: wgpu::BufferUsages::VERTEX,
+                    })
+            });
+            let mut encoder = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("lemi record"),
+                });
+            let color_view = targets.color.create_view(&Default::default());
+            let vdepth_view = targets.view_depth.create_view(&Default::default());
+            let depth_view = targets.depth.create_view(&Default::default());
+            {
+                let clear = wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                };
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("lemi layer pass"),
+                    color_attachments: &[
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &color_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &vdepth_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                    ],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(0.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if let Some(buffer) = &buffer {
+                    pass.set_pipeline(&self.pipeline);
+                    pass.set_bind_group(0, &self.globals_group, &[]);
+                    pass.set_vertex_buffer(0, buffer.slice(..));
+                    for r in runs.iter().filter(|r| r.count > 0) {
+                        if let Some(g) = materials.bind_group(r.material) {
+                            pass.set_bind_group(1, g, &[]);
+                            pass.draw(3 * r.first..3 * (r.first + r.count), 0..1);
+                        }
+                    }
+                }
+            }
+            for (texture, buffer) in [
+                (&targets.color, &targets.color_readback),
+                (&targets.view_depth, &targets.depth_readback),
+            ] {
+                encoder.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyBufferInfo {
+                        buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded_bytes_per_row(self.res, 4)),
+                            rows_per_image: Some(self.res),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width: self.res,
+                        height: self.res,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
+            self.queue.submit([encoder.finish()]);
+        })?;
+        let mut rgba = self.read_rows(&targets.color_readback)?;
+        let mut depth: Vec<f32> = self
+            .read_rows(&targets.depth_readback)?
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
+            if px[3] == 0 {
+                px.copy_from_slice(&[0; 4]);
+                *d = f32::INFINITY;
+            } else {
+                px[3] = 255;
+            }
+        }
+        Ok(LayerFrame {
+            res: self.res,
+            rgba,
+            depth,
+        })
+    }
+
+    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let v = pollster::block_on(validation.pop());
+        let o = pollster::block_on(oom.pop());
+        match v.or(o) {
+            Some(e) => Err(GpuError::Wgpu {
+                what: what.to_string(),
+                message: e.to_string(),
+            }),
+            None => Ok(out),
+        }
+    }
+
+    /// Maps a readback buffer and strips the row padding (4 bytes per texel).
+    fn read_rows(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let padded = padded_bytes_per_row(self.res, 4) as usize;
+        let row = self.res as usize * 4;
+        let mut out = Vec::with_capacity(row * self.res as usize);
+        {
+            let view = buffer
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            for r in view.chunks(padded).take(self.res as usize) {
+                out.extend_from_slice(&r[..row]);
+            }
+        }
+        buffer.unmap();
+        Ok(out)
+    }
+}
+
+fn make_targets(device: &wgpu::Device, res: u32) -> Targets {
+    let size = wgpu::Extent3d {
+        width: res,
+        height: res,
+        depth_or_array_layers: 1,
+    };
+    let tex = |label: &str, format, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+    let readback = |label: &str| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: padded_bytes_per_row(res, 4) as u64 * res as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    };
+    Targets {
+        color: tex("lemi layer colour", COLOR_FORMAT, rt),
+        view_depth: tex("lemi layer depth", VIEW_DEPTH_FORMAT, rt),
+        depth: tex(
+            "lemi layer z",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ),
+        color_readback: readback("lemi layer colour readback"),
+        depth_readback: readback("lemi layer depth readback"),
+    }
+}
+
+/// The non-indexed vertex stream: each vertex with its whole triangle, positions in f32 relative to
+/// the cell centre (the f64 → f32 rounding happens after the centre was subtracted), colours
+/// normalised to [0, 1].
+fn rec_vertices(triangles: &[ClipVertex]) -> Vec<RecVertex> {
+    let mut out = Vec::with_capacity(triangles.len());
+    for tri in triangles.chunks_exact(3) {
+        let v = RecVertex {
+            positions: [0, 1, 2].map(|k| tri[k].rel.as_vec3().to_array()),
+            corner: 0,
+            normals: [0, 1, 2].map(|k| tri[k].normal),
+            uv01: [tri[0].uv[0], tri[0].uv[1], tri[1].uv[0], tri[1].uv[1]],
+            uv2: tri[2].uv,
+            colors: [0, 1, 2].map(|k| tri[k].color.map(|c| (c / 255.0).clamp(0.0, 1.0))),
+        };
+        out.extend((0..3).map(|corner| RecVertex { corner, ..v }));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vertex_is_148_bytes_and_carries_the_whole_triangle() {
+        assert_eq!(std::mem::size_of::<RecVertex>(), 148);
+        let v = |x: f64| ClipVertex {
+            rel: DVec3::new(x, 0.0, 1.0),
+            normal: [0.0, 0.0, 1.0],
+            uv: [0.0; 2],
+            color: [255.0, 510.0, 0.0, 255.0],
+        };
+        let r = rec_vertices(&[v(0.0), v(1.0), v(2.0)]);
+        assert_eq!(r.len(), 3);
+        assert_eq!(r.iter().map(|v| v.corner).collect::<Vec<_>>(), [0, 1, 2]);
+        assert_eq!(r[1].positions, r[0].positions);
+        assert_eq!(r[2].positions[1][0], 1.0);
+        assert_eq!(r[0].colors[2], [1.0, 1.0, 0.0, 1.0]);
+    }
+}
