@@ -322,6 +322,18 @@ fn bad_parameters_are_errors() {
         f(&mut p);
         assert!(place_object_layers(&p).is_err(), "mutation {i}");
     }
+    // From far back in a shaft no layer keeps points at infinity within α: an infinitely deep
+    // object is an error there, while a box cell represents it with one far layer.
+    let mut p = obj;
+    p.depth = f64::INFINITY;
+    assert!(place_object_layers(&p).is_ok());
+    p.cell = ObjectCell::Shaft {
+        apex_angle: deg(10.0),
+        apex_distance: 60.0,
+    };
+    assert!(place_object_layers(&p).is_err());
+    p.depth = 20.0;
+    assert!(place_object_layers(&p).is_ok());
 }
 
 /// The output-view helpers: the default view (60°, 1280 px) and the resolution warning threshold.

@@ -11,7 +11,8 @@
 
 use glam::DVec3;
 use lemi_core::placement::{
-    place_env_layers, place_object_layers, Bound, EnvParams, ObjectCell, ObjectParams, Target,
+    place_env_layers, place_object_layers, Bound, EnvParams, ObjectCell, ObjectParams,
+    PlacementError, Target,
 };
 use proptest::prelude::*;
 
@@ -140,6 +141,58 @@ fn box_views(h: DVec3, extra: u64, seed: u64) -> Vec<DVec3> {
     v
 }
 
+/// Viewpoints of a shaft cell exactly as `ObjectCell::Shaft` defines it (reference viewpoint at the
+/// origin, z toward the object): the near border at `z = s`, the apex `apex_distance` beyond it,
+/// the cell `z ≤ s`, `|x|, |y| ≤ (s + apex_distance − z)·tan(β/2)`, unbounded backwards. For each
+/// back distance `μ` (on the near border, around the apex and object distances where the parallax
+/// peaks, and far back) the corners and centre of the cross-section (on the near border also the
+/// edge midpoints), plus random interior points with log-distributed `μ`. `far` is the object's far side (from the origin).
+fn shaft_views(s: f64, apex_angle: f64, apex_distance: f64, far: f64, seed: u64) -> Vec<DVec3> {
+    let tan = (apex_angle / 2.0).tan();
+    let scale = s + apex_distance;
+    let cross = |mu: f64, x: f64, y: f64| {
+        let z = s - mu;
+        let hw = (s + apex_distance - z) * tan;
+        DVec3::new(x * hw, y * hw, z)
+    };
+    let mut v = Vec::new();
+    let mut backs = vec![0.0, 0.1 * scale, 1e4 * scale];
+    for f in [0.3, 0.6, 1.0, 1.5, 2.5, 5.0, 30.0] {
+        backs.push(f * scale);
+        backs.push(f * far);
+    }
+    for mu in backs {
+        // The parallax peaks on the cell's boundary, at its corner edges (the centre and, on the
+        // near border, the edge midpoints check that).
+        for (x, y) in [
+            (-1.0, -1.0),
+            (-1.0, 1.0),
+            (1.0, -1.0),
+            (1.0, 1.0),
+            (0.0, 0.0),
+        ] {
+            v.push(cross(mu, x, y));
+        }
+        if mu == 0.0 {
+            for (x, y) in [(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)] {
+                v.push(cross(mu, x, y));
+            }
+        }
+    }
+    let mut st = seed | 1;
+    let mut rnd = || {
+        st ^= st << 13;
+        st ^= st >> 7;
+        st ^= st << 17;
+        (st >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..8 {
+        let mu = scale * (1e-2f64).powf(1.0 - 4.0 * rnd());
+        v.push(cross(mu, 2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0));
+    }
+    v
+}
+
 const TOL: f64 = 1e-9;
 
 /// Checks one environment-map placement; returns (worst parallax / α, worst texel shift).
@@ -244,7 +297,12 @@ proptest! {
             ObjectCell::Shaft { .. } => s_frac * cell.near_width()[0],
         };
         let p = ObjectParams { cell, s, t0, depth, size: [wx, wy], res, alpha: alpha_deg.to_radians() };
-        let pl = place_object_layers(&p).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        // A tiny object deep inside a very wide cell can need more than MAX_LAYERS layers (by the
+        // one-texel spacing alone); that is a documented error, not a broken guarantee.
+        let pl = match place_object_layers(&p) {
+            Err(PlacementError::TooManyLayers { .. }) => return Ok(()),
+            r => r.map_err(|e| TestCaseError::fail(e.to_string()))?,
+        };
         // Viewpoints relative to the reference viewpoint; z toward the object.
         let views: Vec<DVec3> = match cell {
             ObjectCell::Box { width, depth } => {
@@ -255,27 +313,11 @@ proptest! {
                     .collect()
             }
             ObjectCell::Shaft { apex_angle, apex_distance } => {
-                let tan = (apex_angle / 2.0).tan();
-                let mut v = Vec::new();
-                for back in [0.0, 0.3, 1.0, 3.0, 10.0, 100.0, 1e4] {
-                    let z = s - back * (s + apex_distance);
-                    let hw = (s + apex_distance - z) * tan;
-                    for x in [-1.0, 0.0, 1.0] {
-                        for y in [-1.0, 0.0, 1.0] {
-                            v.push(DVec3::new(x * hw, y * hw, z));
-                        }
-                    }
-                }
-                v
+                shaft_views(s, apex_angle, apex_distance, t0 + depth + s, seed)
             }
         };
-        // Parallax: for a shaft only from its near border, the TR's assumption (sec. 2.1.2), which
-        // does not hold for viewpoints far back in a narrow shaft (see docs/PLACEMENT.md).
-        let parallax_views: Vec<DVec3> = if shaft {
-            views.iter().copied().filter(|v| v.z == s).collect()
-        } else {
-            views.clone()
-        };
+        // Parallax and texel shifts are both checked from the whole cell (for a shaft: its near
+        // border, the region behind it out to far beyond the object, random interior points).
         let k = [wx / (2.0 * (t0 + s)), wy / (2.0 * (t0 + s))];
         let picks: Vec<usize> = if pl.layers.len() <= 24 {
             (0..pl.layers.len()).collect()
@@ -286,7 +328,7 @@ proptest! {
         for &i in &picks {
             let l = pl.layers[i];
             for z in [l.near_border, l.far_border] {
-                let a = max_parallax(&parallax_views, k, z + s, l.distance + s) / p.alpha;
+                let a = max_parallax(&views, k, z + s, l.distance + s) / p.alpha;
                 prop_assert!(a <= 1.0 + TOL, "parallax {a}·α at layer {i} ({l:?}) border {z} ({p:?})");
             }
             if i + 1 < pl.layers.len() {

@@ -19,6 +19,12 @@
 //! (`b = t + e_min(t)`, then `b + e_min(b)`); when the one-texel spacing wins, the border is
 //! eq. 6. The last layer is the first whose range `t + e_min(t)` reaches the object's far side;
 //! beyond [`single_layer_distance`] (`f ≥ b`, `e_min` unbounded) one layer covers everything.
+//!
+//! Deviation from the TR: it assumes the largest parallax is seen from the cell border nearest the
+//! object. That is false for a box whose reference viewpoint sits near its front (its far corners
+//! are also checked) and for shafts, where viewpoints far behind the near border, where the shaft
+//! is wide, see several α; for shafts [`shaft_reach`] bounds the parallax from the whole shaft
+//! (exactly along its corner edge, for the rays of the frustum).
 
 use super::{border_between, check_alpha, invalid, Bound, Layer, PlacementError, MAX_LAYERS};
 use serde::{Deserialize, Serialize};
@@ -201,23 +207,166 @@ pub fn e_min_eq7(t: f64, r: f64, s: f64, alpha: f64) -> f64 {
 
 /// The depth range behind (and, by symmetry, the range in front reaching) a plane at distance `t`
 /// (TR coordinates) within which the parallax stays below α from the whole cell: `e_min` (eq. 7)
-/// of every critical viewpoint, the smallest. Infinite when one layer suffices.
+/// of every critical viewpoint, the smallest; for a shaft also the exact range seen from the
+/// whole shaft ([`shaft_reach`]). Infinite when one layer suffices.
 pub fn e_min(t: f64, p: &ObjectParams) -> f64 {
-    p.critical_views()
+    let front = p
+        .critical_views()
         .into_iter()
         .map(|(r, z)| e_min_eq7(t + p.s - z, r, z, p.alpha))
-        .fold(f64::INFINITY, f64::min)
+        .fold(f64::INFINITY, f64::min);
+    match p.cell {
+        ObjectCell::Box { .. } => front,
+        ObjectCell::Shaft { .. } => shaft_reach_capped(t, t + front, p) - t,
+    }
+}
+
+/// The number of frustum rays [`shaft_reach`] checks (evenly spaced over the frustum diagonal).
+const SHAFT_RAYS: usize = 33;
+
+/// One frustum ray `(u, 1)` of the shaft check in the plane through the reference viewpoint and the
+/// shaft's corner edge (TR Fig. 8): the viewpoints `V(μ) = (r0 + μ·r0/A, s − μ)`, `μ ≥ 0` behind
+/// the near border, written in the ray's frame as `a(μ) = a0 + a1·μ` along the ray and
+/// `h(μ) = h0 + h1·μ` across it; `len` is `|(u, 1)|`.
+struct ShaftRay {
+    a0: f64,
+    a1: f64,
+    h0: f64,
+    h1: f64,
+    len: f64,
+}
+
+impl ShaftRay {
+    /// Whether the segment between the depths `l` and `z` (from the reference viewpoint, `z > l`,
+    /// `z` may be infinite) on this ray subtends at most α (`ta = tan α`) from every `V(μ)`. With
+    /// `λ = ℓ − a` the distances along the ray from the foot of `V`, the subtended angle is
+    /// `atan(|h|·(ℓ_z − ℓ_l) / (h² + λ_l·λ_z))` (the difference of the two view angles, TR Fig. 7
+    /// right), so the condition `tan α·(h² + λ_l·λ_z) − |h|·(ℓ_z − ℓ_l) ≥ 0` is a quadratic in `μ`
+    /// (once for each sign of `h`) whose minimum over `μ ≥ 0` lies at its vertex or at `μ = 0`.
+    fn holds(&self, l: f64, z: f64, ta: f64) -> bool {
+        let ll = l * self.len;
+        let lam0 = ll - self.a0;
+        for sigma in [1.0, -1.0] {
+            if z.is_infinite() {
+                // Divided by ℓ_z → ∞: tan α·λ_l(μ) − σ·h(μ) ≥ 0, affine in μ.
+                let f0 = ta * lam0 - sigma * self.h0;
+                let f1 = -ta * self.a1 - sigma * self.h1;
+                if f0 < 0.0 || f1 < 0.0 {
+                    return false;
+                }
+                continue;
+            }
+            let lz = z * self.len;
+            let dz = lz - ll;
+            let mz0 = lz - self.a0;
+            let c2 = ta * (self.h1 * self.h1 + self.a1 * self.a1);
+            let c1 = ta * (2.0 * self.h0 * self.h1 - self.a1 * (lam0 + mz0)) - sigma * self.h1 * dz;
+            let c0 = ta * (self.h0 * self.h0 + lam0 * mz0) - sigma * self.h0 * dz;
+            let min = if c1 < 0.0 && c2 > 0.0 {
+                c0 - c1 * c1 / (4.0 * c2)
+            } else {
+                c0
+            };
+            if min < 0.0 {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// The far end (TR coordinates) of the depth range behind a plane at `t` that keeps the parallax
+/// within α from **every** viewpoint of a shaft cell, not only from its near border. The TR assumes
+/// the largest parallax occurs on the near border (sec. 2.1.2, "because the impostor appears in
+/// maximum magnification"), but in a narrow shaft a viewpoint far behind it, where the shaft is
+/// much wider, sees several α. The check runs in the plane of the shaft's corner edge (TR Fig. 8,
+/// `r0` = distance of the near-border corner from the axis), over all viewpoints of that edge
+/// (`μ ≥ 0`, exact per ray, see [`ShaftRay::holds`]) and [`SHAFT_RAYS`] rays spanning the frustum
+/// diagonal `|u| ≤ √(kx² + ky²)` (a superset of the frustum's rays in that plane). Unlike eq. 7 it
+/// considers only rays inside the frustum, which keeps the range from collapsing for far
+/// viewpoints. Bisection on `1/z`, rounded toward the near side. Infinite when the whole ray behind
+/// `t` stays within α. For a box cell: `t + e_min(t)`.
+pub fn shaft_reach(t: f64, p: &ObjectParams) -> f64 {
+    if matches!(p.cell, ObjectCell::Box { .. }) {
+        return t + e_min(t, p);
+    }
+    shaft_reach_capped(t, f64::INFINITY, p)
+}
+
+/// [`shaft_reach`], but at most `cap` (returned at once when the whole shaft allows it, which
+/// saves the bisection when eq. 7 from the near border is the binding bound).
+fn shaft_reach_capped(t: f64, cap: f64, p: &ObjectParams) -> f64 {
+    let ObjectCell::Shaft { apex_distance, .. } = p.cell else {
+        return cap;
+    };
+    let s = p.s;
+    let n = p.cell.near_width();
+    let r0 = (n[0] / 2.0).hypot(n[1] / 2.0);
+    let grow = r0 / apex_distance;
+    let kx = p.size[0] / (2.0 * (p.t0 + s));
+    let ky = p.size[1] / (2.0 * (p.t0 + s));
+    let kd = kx.hypot(ky);
+    let rays: [ShaftRay; SHAFT_RAYS] = std::array::from_fn(|i| {
+        // The extreme rays first: they bind most often, and `all` stops at the first failure.
+        let j = if i % 2 == 0 {
+            i / 2
+        } else {
+            SHAFT_RAYS - 1 - i / 2
+        };
+        let u = kd * (2.0 * j as f64 / (SHAFT_RAYS - 1) as f64 - 1.0);
+        let len = u.hypot(1.0);
+        // V(μ) = (r0 + grow·μ, s − μ); a = V·(u, 1)/len, h = V × (u, 1)/len.
+        ShaftRay {
+            a0: (u * r0 + s) / len,
+            a1: (u * grow - 1.0) / len,
+            h0: (r0 - u * s) / len,
+            h1: (grow + u) / len,
+            len,
+        }
+    });
+    let ta = p.alpha.tan();
+    let l = t + s;
+    let ok = |z: f64| rays.iter().all(|r| r.holds(l, z, ta));
+    if ok(cap + s) {
+        return cap;
+    }
+    // Feasible for x = l/z ∈ [x*, 1] and x* > l/(cap + s): bisection, keeping the feasible end.
+    let (mut lo, mut hi) = (l / (cap + s), 1.0f64);
+    while hi - lo > 1e-13 * hi {
+        let mid = 0.5 * (lo + hi);
+        if ok(l / mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    l / hi - s
 }
 
 /// The distance (TR coordinates) beyond which one layer represents the whole rest of the object:
 /// where the denominator of `e_min` vanishes for every critical viewpoint (`f ≥ b`),
-/// `t = ((r·cos α + √(r² + s²))/sin α − s) / 2` from that viewpoint.
+/// `t = ((r·cos α + √(r² + s²))/sin α − s) / 2` from that viewpoint (eq. 7). For a shaft also the
+/// whole shaft must allow an infinite range ([`shaft_reach`]), otherwise this is infinite.
 pub fn single_layer_distance(p: &ObjectParams) -> f64 {
     let a = p.alpha;
-    p.critical_views()
+    let front = p
+        .critical_views()
         .into_iter()
         .map(|(r, z)| ((r * a.cos() + r.hypot(z)) / a.sin() - z) / 2.0 + z - p.s)
-        .fold(f64::NEG_INFINITY, f64::max)
+        .fold(f64::NEG_INFINITY, f64::max);
+    match p.cell {
+        ObjectCell::Box { .. } => front,
+        // From far back in the shaft a point at infinity and its projection on a layer are seen
+        // about the angle between the ray and the shaft edge apart: one layer suffices only where
+        // the exact check allows an infinite range, which is rare.
+        ObjectCell::Shaft { .. } => {
+            if shaft_reach(front.max(p.t0), p).is_infinite() {
+                front
+            } else {
+                f64::INFINITY
+            }
+        }
+    }
 }
 
 /// `c = t_num / den` with a non-positive denominator meaning "no constraint".
@@ -274,6 +423,14 @@ pub fn one_texel_spacing(t: f64, p: &ObjectParams) -> f64 {
 pub fn place_object_layers(p: &ObjectParams) -> Result<ObjectPlacement, PlacementError> {
     p.validate()?;
     let end = p.t0 + p.depth;
+    let single_layer_beyond = single_layer_distance(p);
+    if end.is_infinite() && single_layer_beyond.is_infinite() {
+        return Err(invalid(
+            "depth",
+            p.depth,
+            "an infinitely deep object needs infinitely many layers from this cell (from far back in a shaft no layer keeps the points at infinity within α); give a finite depth",
+        ));
+    }
     let s = p.s;
     let mut layers: Vec<Layer> = Vec::new();
     // Eq. 7 from the object's near side: the first layer's front range reaches t0.
@@ -335,7 +492,7 @@ pub fn place_object_layers(p: &ObjectParams) -> Result<ObjectPlacement, Placemen
     }
     Ok(ObjectPlacement {
         layers,
-        single_layer_beyond: single_layer_distance(p),
+        single_layer_beyond,
         params: *p,
     })
 }
