@@ -218,18 +218,28 @@ impl Gpu {
     /// Runs `f` inside validation and out-of-memory error scopes and turns a captured error into a
     /// [`GpuError::Wgpu`] naming `what`.
     pub fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
-        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let out = f();
-        let v = pollster::block_on(validation.pop());
-        let o = pollster::block_on(oom.pop());
-        match v.or(o) {
-            Some(e) => Err(GpuError::Wgpu {
-                what: what.to_string(),
-                message: e.to_string(),
-            }),
-            None => Ok(out),
-        }
+        scoped(&self.device, what, f)
+    }
+}
+
+/// Runs `f` inside validation and out-of-memory error scopes of `device` and turns a captured error
+/// into a [`GpuError::Wgpu`] naming `what`.
+pub(crate) fn scoped<T>(
+    device: &wgpu::Device,
+    what: &str,
+    f: impl FnOnce() -> T,
+) -> Result<T, GpuError> {
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let out = f();
+    let v = pollster::block_on(validation.pop());
+    let o = pollster::block_on(oom.pop());
+    match v.or(o) {
+        Some(e) => Err(GpuError::Wgpu {
+            what: what.to_string(),
+            message: e.to_string(),
+        }),
+        None => Ok(out),
     }
 }
 

@@ -293,7 +293,7 @@ impl LayerRecorder {
             .targets
             .lock()
             .map_err(|_| GpuError::Readback("recorder target cache poisoned".into()))?;
-        self.scoped("recording a layer", || {
+        crate::device::scoped(&self.device, "recording a layer", || {
             self.queue
                 .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
             let buffer = (!vertices.is_empty()).then(|| {
@@ -385,12 +385,13 @@ impl LayerRecorder {
             }
             self.queue.submit([encoder.finish()]);
         })?;
-        let mut rgba = self.read_rows(&targets.color_readback)?;
-        let mut depth: Vec<f32> = self
-            .read_rows(&targets.depth_readback)?
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
+        let mut rgba =
+            crate::renderer::read_rows(&self.device, &targets.color_readback, self.res, self.res)?;
+        let mut depth: Vec<f32> =
+            crate::renderer::read_rows(&self.device, &targets.depth_readback, self.res, self.res)?
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
         for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
             if px[3] == 0 {
                 px.copy_from_slice(&[0; 4]);
@@ -404,48 +405,6 @@ impl LayerRecorder {
             rgba,
             depth,
         })
-    }
-
-    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
-        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let out = f();
-        let v = pollster::block_on(validation.pop());
-        let o = pollster::block_on(oom.pop());
-        match v.or(o) {
-            Some(e) => Err(GpuError::Wgpu {
-                what: what.to_string(),
-                message: e.to_string(),
-            }),
-            None => Ok(out),
-        }
-    }
-
-    /// Maps a readback buffer and strips the row padding (4 bytes per texel).
-    fn read_rows(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
-        let (tx, rx) = std::sync::mpsc::channel();
-        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let padded = padded_bytes_per_row(self.res, 4) as usize;
-        let row = self.res as usize * 4;
-        let mut out = Vec::with_capacity(row * self.res as usize);
-        {
-            let view = buffer
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            for r in view.chunks(padded).take(self.res as usize) {
-                out.extend_from_slice(&r[..row]);
-            }
-        }
-        buffer.unmap();
-        Ok(out)
     }
 }
 

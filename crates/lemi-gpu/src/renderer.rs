@@ -192,21 +192,6 @@ impl Renderer {
         })
     }
 
-    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
-        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let out = f();
-        let v = pollster::block_on(validation.pop());
-        let o = pollster::block_on(oom.pop());
-        match v.or(o) {
-            Some(e) => Err(GpuError::Wgpu {
-                what: what.to_string(),
-                message: e.to_string(),
-            }),
-            None => Ok(out),
-        }
-    }
-
     fn make_targets(&self, width: u32, height: u32) -> Targets {
         let size = wgpu::Extent3d {
             width,
@@ -272,9 +257,11 @@ impl Renderer {
             .as_ref()
             .is_none_or(|t| t.width != width || t.height != height)
         {
-            *guard = Some(self.scoped("creating render targets", || {
-                self.make_targets(width, height)
-            })?);
+            *guard = Some(crate::device::scoped(
+                &self.device,
+                "creating render targets",
+                || self.make_targets(width, height),
+            )?);
         }
         let Some(targets) = guard.as_ref() else {
             return Err(GpuError::Readback("render targets missing".into()));
@@ -288,7 +275,7 @@ impl Renderer {
                 )));
             }
         }
-        self.scoped("rendering", || {
+        crate::device::scoped(&self.device, "rendering", || {
             self.queue
                 .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
             let mut encoder = self
@@ -375,8 +362,8 @@ impl Renderer {
             }
             self.queue.submit([encoder.finish()]);
         })?;
-        let rgba = self.read_rows(&targets.color_readback, width, height)?;
-        let depth_bytes = self.read_rows(&targets.depth_readback, width, height)?;
+        let rgba = read_rows(&self.device, &targets.color_readback, width, height)?;
+        let depth_bytes = read_rows(&self.device, &targets.depth_readback, width, height)?;
         let mut depth: Vec<f32> = depth_bytes
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -397,38 +384,38 @@ impl Renderer {
             depth,
         })
     }
+}
 
-    /// Maps a readback buffer and strips the row padding (4 bytes per texel).
-    fn read_rows(
-        &self,
-        buffer: &wgpu::Buffer,
-        width: u32,
-        height: u32,
-    ) -> Result<Vec<u8>, GpuError> {
-        let (tx, rx) = std::sync::mpsc::channel();
-        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
+/// Maps a readback buffer of `width × height` 4-byte texels and strips the row padding.
+pub(crate) fn read_rows(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let padded = padded_bytes_per_row(width, 4) as usize;
+    let row = width as usize * 4;
+    let mut out = Vec::with_capacity(row * height as usize);
+    {
+        let view = buffer
+            .get_mapped_range(..)
             .map_err(|e| GpuError::Readback(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        let padded = padded_bytes_per_row(width, 4) as usize;
-        let row = width as usize * 4;
-        let mut out = Vec::with_capacity(row * height as usize);
-        {
-            let view = buffer
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            for r in view.chunks(padded).take(height as usize) {
-                out.extend_from_slice(&r[..row]);
-            }
+        for r in view.chunks(padded).take(height as usize) {
+            out.extend_from_slice(&r[..row]);
         }
-        buffer.unmap();
-        Ok(out)
     }
+    buffer.unmap();
+    Ok(out)
 }
 
 #[cfg(test)]
