@@ -1,7 +1,10 @@
-//! lemi-bake: orchestration of the bake (GI 2002 sec. 3-5): which cells to bake, resuming,
-//! sharding and merging, atomic output. The per-cell work (placement, classification, GPU recording,
-//! compression) is a function handed to [`run`], so the orchestration is independent of the GPU.
+//! lemi-bake: the bake job (GI 2002 sec. 3-5): which cells to bake, resuming, sharding and merging,
+//! atomic output ([`orchestrate`]), and the work of one cell: placement, classification,
+//! crack-free GPU recording, compression ([`cell_bake`]).
 
+pub mod cell_bake;
+pub mod clip_border;
 pub mod orchestrate;
 
-pub use orchestrate::{merge, run, BakeError, BakeJob, CellOutcome, RunSummary};
+pub use cell_bake::{place_cell, validate_params, Baker, Stage};
+pub use orchestrate::{merge, run, BakeError, BakeJob, CellOutcome, RunSummary, ShardRecord};

@@ -1,6 +1,7 @@
 //! `lemi`: the command-line front end. Each subcommand lives in its own `cmd_*.rs` file with an
 //! `Args` struct and a `run` function; the libraries do the work.
 
+mod cmd_bake;
 mod cmd_demo;
 mod cmd_info;
 mod cmd_layers;
@@ -21,6 +22,8 @@ struct Cli {
 enum Command {
     /// The main job on the built-in default scene: placement, reference and cube-face renders.
     Demo(cmd_demo::Args),
+    /// Bake view cells into a bundle of layered impostors (resumable, shardable).
+    Bake(cmd_bake::Args),
     /// Print triangle/material counts, bounds and import statistics of a scene.
     Info(cmd_info::Args),
     /// Render a scene from a camera with the GPU reference renderer.
@@ -34,6 +37,7 @@ fn main() {
     let result = match cli.command {
         Command::Demo(a) => cmd_demo::run(a),
         Command::Info(a) => cmd_info::run(a),
+        Command::Bake(a) => cmd_bake::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),
     };

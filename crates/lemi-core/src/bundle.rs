@@ -10,6 +10,7 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::cell::{CellGrid, ViewCell};
+use crate::compress::MacroTexture;
 use crate::container::{self, Blob, ContainerError};
 use crate::Face;
 
@@ -118,6 +119,23 @@ pub struct Quad {
     pub rect: [u32; 4],
     /// Stored rotated by 90° (GI 2002 sec. 5.4: tall micro-textures are turned to lie flat).
     pub rotated: bool,
+}
+
+impl Quad {
+    /// Macro-texture texel-edge coordinates `[x, y]` of the quad's corners, in the order of
+    /// [`Quad::corners`]; divide by the macro-texture's size for texture coordinates. Undoes the
+    /// 90° clockwise turn of a rotated micro-texture (see
+    /// [`crate::compress::MacroPlacement::macro_corners`]): with `rect = [x, y, w, h]` as stored,
+    /// an unrotated quad maps its corners to `(x, y) (x+w, y) (x+w, y+h) (x, y+h)`, a rotated one to
+    /// `(x+w, y) (x+w, y+h) (x, y+h) (x, y)`.
+    pub fn macro_texel_corners(&self) -> [[u32; 2]; 4] {
+        let [x, y, w, h] = self.rect;
+        if self.rotated {
+            [[x + w, y], [x + w, y + h], [x, y + h], [x, y]]
+        } else {
+            [[x, y], [x + w, y], [x + w, y + h], [x, y + h]]
+        }
+    }
 }
 
 /// A macro-texture: stored as a PNG blob named `name`.
@@ -294,6 +312,37 @@ impl CellFile {
         Ok(CellFile { header, near, pngs })
     }
 
+    /// Decodes the PNG macro-textures to RGBA8, checking that each has the size its header says.
+    pub fn decode_macros(&self) -> Result<Vec<MacroTexture>, ContainerError> {
+        self.header
+            .macros
+            .iter()
+            .zip(&self.pngs)
+            .map(|(m, png)| {
+                let img = image::load_from_memory_with_format(png, image::ImageFormat::Png)
+                    .map_err(|e| {
+                        ContainerError::Header(format!("{}: not a valid PNG: {e}", m.name))
+                    })?
+                    .to_rgba8();
+                if img.width() != m.width || img.height() != m.height {
+                    return Err(ContainerError::Header(format!(
+                        "{}: PNG is {}x{}, the header says {}x{}",
+                        m.name,
+                        img.width(),
+                        img.height(),
+                        m.width,
+                        m.height
+                    )));
+                }
+                Ok(MacroTexture {
+                    width: m.width,
+                    height: m.height,
+                    rgba: img.into_raw(),
+                })
+            })
+            .collect()
+    }
+
     /// Reads and verifies a cell file.
     pub fn read(path: &Path) -> Result<CellFile, BundleError> {
         let bytes = std::fs::read(path).map_err(|source| BundleError::Io {
@@ -305,6 +354,20 @@ impl CellFile {
             source,
         })
     }
+}
+
+/// Encodes an RGBA8 image as PNG (best compression: macro-textures are written once, read often).
+pub fn encode_png(rgba: &[u8], width: u32, height: u32) -> Result<Vec<u8>, ContainerError> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Best,
+        image::codecs::png::FilterType::Adaptive,
+    )
+    .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+    .map_err(|e| ContainerError::Header(format!("encoding a {width}x{height} PNG: {e}")))?;
+    Ok(out)
 }
 
 /// The reference viewpoint of a cell as f64 (helper for stages that work relative to it).
@@ -363,5 +426,53 @@ mod tests {
         let n = bad.len();
         bad[n / 3] ^= 1;
         assert!(CellFile::decode(&bad).is_err());
+    }
+
+    #[test]
+    fn macro_texel_corners_undo_the_rotation() {
+        use crate::compress::MacroPlacement;
+        // a 3 x 5 micro-texture placed at (10, 20), rotated: footprint 5 x 3
+        let p = MacroPlacement {
+            macro_index: 0,
+            x: 10,
+            y: 20,
+            rotated: true,
+        };
+        let (fw, fh) = p.footprint(3, 5);
+        let q = Quad {
+            face: Face::PosX,
+            layer: 0,
+            corners: [[0.0; 3]; 4],
+            macro_index: 0,
+            rect: [10, 20, fw, fh],
+            rotated: true,
+        };
+        assert_eq!(q.macro_texel_corners(), p.macro_corners(3, 5));
+        let p = MacroPlacement {
+            rotated: false,
+            ..p
+        };
+        let q = Quad {
+            rect: [10, 20, 3, 5],
+            rotated: false,
+            ..q
+        };
+        assert_eq!(q.macro_texel_corners(), p.macro_corners(3, 5));
+    }
+
+    #[test]
+    fn png_round_trip_and_size_check() {
+        let rgba: Vec<u8> = (0..4 * 6 * 4).map(|i| (i * 7 % 256) as u8).collect();
+        let png = encode_png(&rgba, 6, 4).unwrap();
+        let mut c = sample_cell();
+        c.header.macros[0].width = 6;
+        c.header.macros[0].height = 4;
+        c.pngs = vec![png];
+        let m = c.decode_macros().unwrap();
+        assert_eq!(m[0].rgba, rgba);
+        c.header.macros[0].width = 7;
+        assert!(c.decode_macros().is_err());
+        c.pngs = vec![vec![1, 2, 3]];
+        assert!(c.decode_macros().is_err());
     }
 }

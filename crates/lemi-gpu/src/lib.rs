@@ -4,6 +4,8 @@
 //! - [`shading`]: the one shading model (WGSL module + CPU mirror) every pipeline shares.
 //! - [`GpuScene`]: materials and chunked geometry on the GPU.
 //! - [`Renderer`]: the reference renderer, the ground truth impostors are compared with.
+//! - [`ImpostorRenderer`]: the runtime view of one baked cell ([`ImpostorCell`]): near geometry
+//!   plus the layered impostor quads.
 //!
 //! ```no_run
 //! use lemi_core::camera::Camera;
@@ -20,6 +22,7 @@
 //! ```
 
 mod device;
+pub mod impostor;
 pub mod recorder;
 mod renderer;
 mod scene;
@@ -27,6 +30,7 @@ pub mod shading;
 pub mod texture;
 
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
+pub use impostor::{ImpostorCell, ImpostorRenderer, QUAD_ALPHA_CUTOFF};
 pub use recorder::{LayerFrame, LayerRecorder, MaterialRun};
 pub use renderer::{
     padded_bytes_per_row, Frame, RenderOptions, Renderer, COLOR_FORMAT, DEPTH_FORMAT,

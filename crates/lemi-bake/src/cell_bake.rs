@@ -1,0 +1,425 @@
+//! The work of one view cell (GI 2002 sec. 3-5, TR-186-2-02-04 sec. 2.2): placement →
+//! classification → crack-free GPU recording of every (face, layer) → compression → cell file.
+//!
+//! - **placement**: per baked face, `lemi_core::placement::place_env_layers` for the cell's extent
+//!   along and across the face axis;
+//! - **classification**: `lemi_core::classify`: the near list and, per (face, slab), the bin of
+//!   triangles overlapping it, so recording a layer submits only its bin;
+//! - **recording**: each bin's triangles are clipped to the slab on the CPU (canonical cuts, so a
+//!   border's cut is bit-identical in both layers), then drawn with conservative coverage by
+//!   [`lemi_gpu::LayerRecorder`]; the cut edges' texels are flagged as clip-border texels
+//!   ([`crate::clip_border`]);
+//! - **compression**: `lemi_core::compress::compress_cell` (gap fill, hidden texels, micro-textures,
+//!   macro packing), then PNG per macro-texture;
+//! - the result is a [`CellFile`]: quads with world-space corners, PNG macro-textures, near list,
+//!   statistics (GI 2002 Table 2 and more).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+use lemi_core::bundle::{
+    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, LayerTarget, MacroInfo,
+    Quad,
+};
+use lemi_core::cell::ViewCell;
+use lemi_core::classify::{classify, TriRef, TriangleBounds};
+use lemi_core::clip::{clip_to_slab, ClipVertex};
+use lemi_core::compress::{
+    compress_cell, CompressOptions, FaceLayers, LayerImage, MicroTextureOptions,
+};
+use lemi_core::placement::{place_env_layers, Axis, EnvParams, Placement, Target};
+use lemi_core::{Face, Scene};
+use lemi_gpu::{Gpu, GpuMaterials, LayerRecorder, Lighting, MaterialRun};
+use rayon::prelude::*;
+
+use crate::clip_border::mark_clip_borders;
+use crate::BakeError;
+
+/// What a baker needs once per scene: the scene, its triangles in f64, its materials on the GPU and
+/// the layer recorder.
+pub struct Baker<'a> {
+    pub scene: &'a Scene,
+    pub params: BakeParams,
+    pub lighting: Lighting,
+    tris: TriangleBounds,
+    materials: Arc<GpuMaterials>,
+    recorder: LayerRecorder,
+}
+
+/// A stage of one cell, reported for progress.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stage {
+    Placement,
+    Classify,
+    /// Recording layer `layer` of `layers` of face `face`.
+    Record {
+        face: Face,
+        layer: usize,
+        layers: usize,
+    },
+    Compress,
+    Png,
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stage::Placement => write!(f, "placement"),
+            Stage::Classify => write!(f, "classify"),
+            Stage::Record {
+                face,
+                layer,
+                layers,
+            } => write!(f, "record {face} {}/{layers}", layer + 1),
+            Stage::Compress => write!(f, "compress"),
+            Stage::Png => write!(f, "png"),
+        }
+    }
+}
+
+/// The face axis as a placement axis.
+fn axis_of(face: Face) -> Axis {
+    match face {
+        Face::PosX | Face::NegX => Axis::X,
+        Face::PosY | Face::NegY => Axis::Y,
+        Face::PosZ | Face::NegZ => Axis::Z,
+    }
+}
+
+/// The placement of every baked face of `cell`.
+pub fn place_cell(params: &BakeParams, cell: &ViewCell) -> Result<Vec<Placement>, BakeError> {
+    let target = match params.target {
+        LayerTarget::Layers(n) => Target::Layers(n as usize),
+        LayerTarget::NearField(d) => Target::NearField(d),
+    };
+    params
+        .faces
+        .iter()
+        .map(|&face| {
+            let env =
+                EnvParams::box_face(cell.half, axis_of(face), params.resolution, params.alpha);
+            place_env_layers(&env, target).map_err(|e| BakeError::Cell {
+                cell: cell.id(),
+                message: format!("placing the layers of face {face}: {e}"),
+            })
+        })
+        .collect()
+}
+
+impl<'a> Baker<'a> {
+    /// Prepares baking `scene` with `params`: triangle bounds, materials on the GPU, recorder.
+    pub fn new(gpu: &Gpu, scene: &'a Scene, params: BakeParams) -> Result<Baker<'a>, BakeError> {
+        validate_params(&params)?;
+        let gpu_err = |what: &str| {
+            let what = what.to_string();
+            move |e: lemi_gpu::GpuError| BakeError::Invalid(format!("{what}: {e}"))
+        };
+        let materials = Arc::new(
+            GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
+                .map_err(gpu_err("uploading the scene's materials"))?,
+        );
+        let recorder = LayerRecorder::new(gpu, params.resolution)
+            .map_err(gpu_err("creating the layer recorder"))?;
+        Ok(Baker {
+            scene,
+            params,
+            lighting: Lighting::default(),
+            tris: TriangleBounds::new(scene),
+            materials,
+            recorder,
+        })
+    }
+
+    /// Bakes one cell; `on_stage` is told when each stage starts.
+    pub fn bake(
+        &self,
+        cell: &ViewCell,
+        mut on_stage: impl FnMut(&Stage),
+    ) -> Result<CellFile, BakeError> {
+        let cell_err = |message: String| BakeError::Cell {
+            cell: cell.id(),
+            message,
+        };
+        let mut seconds: Vec<(String, f64)> = Vec::new();
+        let center = cell.center;
+        let params = &self.params;
+        let res = params.resolution;
+
+        on_stage(&Stage::Placement);
+        let t = Instant::now();
+        let placements = place_cell(params, cell)?;
+        let near_field = placements
+            .iter()
+            .map(|p| p.near_field)
+            .fold(0.0f64, f64::max);
+        seconds.push(("placement".into(), t.elapsed().as_secs_f64()));
+
+        on_stage(&Stage::Classify);
+        let t = Instant::now();
+        let borders: Vec<Vec<f64>> = placements
+            .iter()
+            .map(|p| p.layers.iter().map(|l| l.near_border).collect())
+            .collect();
+        let class = classify(&self.tris, center, near_field, &params.faces, &borders);
+        seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
+
+        let t_record = Instant::now();
+        let mut clip_s = 0.0;
+        let mut faces: Vec<FaceLayers> = Vec::with_capacity(params.faces.len());
+        let mut opaque_recorded = 0u64;
+        for (slot, (&face, placement)) in params.faces.iter().zip(&placements).enumerate() {
+            let n = placement.layers.len();
+            // clip every slab of this face on the CPU, in parallel
+            let t = Instant::now();
+            let prepared: Vec<Slab> = placement
+                .layers
+                .par_iter()
+                .enumerate()
+                .map(|(k, layer)| {
+                    self.prepare_slab(
+                        &class.bins[slot][k],
+                        center,
+                        face,
+                        layer.near_border,
+                        layer.far_border,
+                    )
+                })
+                .collect();
+            clip_s += t.elapsed().as_secs_f64();
+            let mut images = Vec::with_capacity(n);
+            for (k, (slab, layer)) in prepared.into_iter().zip(&placement.layers).enumerate() {
+                on_stage(&Stage::Record {
+                    face,
+                    layer: k,
+                    layers: n,
+                });
+                let near_plane = 0.5 * layer.near_border.min(near_field);
+                let frame = self
+                    .recorder
+                    .record(
+                        &self.materials,
+                        DVec3::ZERO,
+                        face,
+                        &slab.vertices,
+                        &slab.runs,
+                        near_plane,
+                        &self.lighting,
+                    )
+                    .map_err(|e| cell_err(format!("recording face {face} layer {k}: {e}")))?;
+                let mut border = vec![false; (res * res) as usize];
+                let planes: Vec<f64> = [layer.near_border, layer.far_border]
+                    .into_iter()
+                    .filter(|p| p.is_finite())
+                    .collect();
+                mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
+                let image = LayerImage::from_parts(res, frame.rgba, border)
+                    .map_err(|e| cell_err(format!("face {face} layer {k}: {e}")))?;
+                opaque_recorded += image.opaque_count();
+                images.push(image);
+            }
+            faces.push(FaceLayers {
+                face,
+                distances: placement.layers.iter().map(|l| l.distance).collect(),
+                layers: images,
+            });
+        }
+        let record_s = t_record.elapsed().as_secs_f64();
+        seconds.push(("clip".into(), clip_s));
+        seconds.push(("record".into(), record_s - clip_s));
+
+        on_stage(&Stage::Compress);
+        let t = Instant::now();
+        let options = CompressOptions {
+            micro: MicroTextureOptions {
+                cell_size: params.micro_grid,
+                threshold: params.micro_threshold,
+            },
+            ..Default::default()
+        };
+        let compressed = compress_cell(&mut faces, &options)
+            .map_err(|e| cell_err(format!("compressing: {e}")))?;
+        drop(faces);
+        seconds.push(("compress".into(), t.elapsed().as_secs_f64()));
+
+        on_stage(&Stage::Png);
+        let t = Instant::now();
+        let pngs: Vec<Vec<u8>> = compressed
+            .macro_textures
+            .par_iter()
+            .map(|m| encode_png(&m.rgba, m.width, m.height))
+            .collect::<Result<_, _>>()
+            .map_err(|e| cell_err(e.to_string()))?;
+        seconds.push(("png".into(), t.elapsed().as_secs_f64()));
+
+        let quads: Vec<Quad> = compressed
+            .micro_textures
+            .iter()
+            .zip(&compressed.placements)
+            .map(|(m, p)| {
+                let (fw, fh) = p.footprint(m.rect.width(), m.rect.height());
+                Quad {
+                    face: m.face,
+                    layer: m.layer as u16,
+                    corners: m.corners().map(|c| (center + c).as_vec3().to_array()),
+                    macro_index: p.macro_index,
+                    rect: [p.x, p.y, fw, fh],
+                    rotated: p.rotated,
+                }
+            })
+            .collect();
+        let macros: Vec<MacroInfo> = compressed
+            .macro_textures
+            .iter()
+            .enumerate()
+            .map(|(i, m)| MacroInfo {
+                name: format!("macro{i}.png"),
+                width: m.width,
+                height: m.height,
+            })
+            .collect();
+        let s = &compressed.stats;
+        let stats = CellStats {
+            far_triangles: class.far_triangles,
+            near_triangles: class.near.len() as u64,
+            submitted_triangles: class.submitted,
+            raw_bytes: s.layer_bytes,
+            opaque_texels_recorded: opaque_recorded,
+            opaque_texels_after_gap_fill: s.hidden.opaque_before,
+            opaque_texels_after_hidden_removal: s.hidden.opaque_after,
+            micro_textures: s.micro.micro_textures,
+            micro_fill_ratio: s.micro.fill_ratio,
+            macro_textures: s.packing.macro_textures,
+            macro_bytes: s.packing.macro_bytes,
+            png_bytes: pngs.iter().map(|p| p.len() as u64).sum(),
+            seconds,
+        };
+        let layers = placements
+            .iter()
+            .map(|p| {
+                p.layers
+                    .iter()
+                    .map(|l| LayerInfo {
+                        distance: l.distance,
+                        near_border: l.near_border,
+                        far_border: if l.far_border.is_finite() {
+                            l.far_border
+                        } else {
+                            f64::MAX
+                        },
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(CellFile {
+            header: CellHeader {
+                cell: *cell,
+                params_hash: params.hash(),
+                scene_fingerprint: String::new(),
+                near_field,
+                layers,
+                quads,
+                macros,
+                stats,
+            },
+            near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
+            pngs,
+        })
+    }
+
+    /// Clips the triangles of one bin to the slab `[near, far]` of `face`, sorted by material, with
+    /// positions relative to `center`.
+    fn prepare_slab(&self, bin: &[TriRef], center: DVec3, face: Face, near: f64, far: f64) -> Slab {
+        let meshes = &self.scene.meshes;
+        let mut refs: Vec<TriRef> = bin.to_vec();
+        refs.sort_by_key(|r| (meshes[r.mesh as usize].material, r.mesh, r.tri));
+        let mut vertices: Vec<ClipVertex> = Vec::with_capacity(3 * refs.len());
+        let mut runs: Vec<MaterialRun> = Vec::new();
+        for r in &refs {
+            let mesh = &meshes[r.mesh as usize];
+            let i = 3 * r.tri as usize;
+            let Some(idx) = mesh.indices.get(i..i + 3) else {
+                continue;
+            };
+            let Some(tri) = idx
+                .iter()
+                .map(|&v| mesh.vertices.get(v as usize))
+                .collect::<Option<Vec<_>>>()
+            else {
+                continue;
+            };
+            let tri = [0, 1, 2].map(|k| ClipVertex::from_vertex(tri[k], center));
+            let first = (vertices.len() / 3) as u32;
+            let added = clip_to_slab(&tri, face, near, far, &mut vertices) as u32;
+            if added == 0 {
+                continue;
+            }
+            match runs.last_mut() {
+                Some(run) if run.material == mesh.material => run.count += added,
+                _ => runs.push(MaterialRun {
+                    material: mesh.material,
+                    first,
+                    count: added,
+                }),
+            }
+        }
+        Slab { vertices, runs }
+    }
+}
+
+/// The clipped triangles of one slab and their material runs.
+struct Slab {
+    vertices: Vec<ClipVertex>,
+    runs: Vec<MaterialRun>,
+}
+
+/// Checks the parameters a user controls before any work starts.
+pub fn validate_params(p: &BakeParams) -> Result<(), BakeError> {
+    let bad = |m: String| Err(BakeError::Invalid(m));
+    if !(p.cell_size.is_finite() && p.cell_size > 0.0) {
+        return bad(format!(
+            "--cell-size must be a positive number of metres (got {})",
+            p.cell_size
+        ));
+    }
+    if !(16..=8192).contains(&p.resolution) {
+        return bad(format!(
+            "--resolution must be between 16 and 8192 texels (got {})",
+            p.resolution
+        ));
+    }
+    if p.faces.is_empty() {
+        return bad("no faces to bake".into());
+    }
+    if !(p.alpha.is_finite() && p.alpha > 0.0 && p.alpha < 0.5) {
+        return bad(format!(
+            "the parallax angle must be in (0, 0.5) radians (got {})",
+            p.alpha
+        ));
+    }
+    match p.target {
+        LayerTarget::Layers(n) if n == 0 || n > 4096 => {
+            return bad(format!("--layers must be between 1 and 4096 (got {n})"))
+        }
+        LayerTarget::NearField(d) if !(d.is_finite() && d > 0.5 * p.cell_size) => {
+            return bad(format!(
+                "--near-field must be a distance beyond the cell's half size {} m (got {d})",
+                0.5 * p.cell_size
+            ))
+        }
+        _ => {}
+    }
+    if p.micro_grid == 0 || p.micro_grid > p.resolution {
+        return bad(format!(
+            "the micro-texture grid must be 1..={} texels (got {})",
+            p.resolution, p.micro_grid
+        ));
+    }
+    if !(0.0..=1.0).contains(&p.micro_threshold) {
+        return bad(format!(
+            "the micro-texture threshold must be in [0, 1] (got {})",
+            p.micro_threshold
+        ));
+    }
+    Ok(())
+}

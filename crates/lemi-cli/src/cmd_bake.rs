@@ -1,0 +1,471 @@
+//! `lemi bake SCENE… -o BUNDLE`: bakes the view cells of a region into a bundle (GI 2002 sec. 3-5):
+//! per cell placement, classification, crack-free GPU recording and compression, each cell file
+//! written atomically as soon as it is done. Resumable (intact cells baked with identical
+//! parameters are skipped), shardable (`--shard K/N`, then `lemi bake --merge BUNDLE`).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use glam::DVec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use lemi_bake::{BakeJob, Baker, CellOutcome};
+use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, SceneRef};
+use lemi_core::cell::{CellGrid, Shard, ViewCell};
+use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
+use lemi_core::{Aabb, Face};
+use lemi_gpu::{BackendChoice, Gpu};
+use serde_json::json;
+
+use crate::load::{load_scene, SceneArgs, UpArg};
+
+/// Bake view cells into a bundle of layered impostors.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Scene inputs (as for `lemi render`); not needed with --merge.
+    #[arg(value_name = "SCENE", required_unless_present = "merge")]
+    pub scenes: Vec<String>,
+    /// Up axis of the input files.
+    #[arg(long, value_enum, default_value = "y")]
+    pub up: UpArg,
+    /// The bundle directory to write (created if missing).
+    #[arg(
+        short = 'o',
+        long = "out",
+        value_name = "BUNDLE",
+        required_unless_present = "merge"
+    )]
+    pub out: Option<PathBuf>,
+    /// Write the manifest of BUNDLE from its shards' records (after all `--shard K/N` runs).
+    #[arg(long, value_name = "BUNDLE", conflicts_with_all = ["scenes", "out", "shard", "cells", "region"])]
+    pub merge: Option<PathBuf>,
+    /// Region the viewer moves in, `x0,y0,z0,x1,y1,z1` in scene coordinates (after --up); cells
+    /// tile it. Default: the scene's ground footprint at --eye-height.
+    #[arg(long, value_parser = parse_region, allow_hyphen_values = true)]
+    pub region: Option<Aabb>,
+    /// Eye height above the scene's lowest point for the default region (metres).
+    #[arg(long, default_value_t = 1.7, allow_hyphen_values = true)]
+    pub eye_height: f64,
+    /// Only these cells of the grid, as grid coordinates `x_y_z` (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub cells: Vec<String>,
+    /// View-cell side in metres.
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
+    pub cell_size: f64,
+    /// Texels per cube-face side (Res).
+    #[arg(long, default_value_t = 512)]
+    pub resolution: u32,
+    /// Layers per face.
+    #[arg(long, conflicts_with = "near_field")]
+    pub layers: Option<u32>,
+    /// Near-field distance from the cell centre (m): the fewest layers that reach it.
+    #[arg(long, allow_hyphen_values = true)]
+    pub near_field: Option<f64>,
+    /// Faces to bake: 4 (the horizontal ones, for ground-level scenes) or 6.
+    #[arg(long, default_value_t = 4)]
+    pub faces: u32,
+    /// Horizontal field of view of the output view in degrees (α = its edge pixel).
+    #[arg(long, conflicts_with = "alpha_deg")]
+    pub output_fov: Option<f64>,
+    /// Width of the output view in pixels.
+    #[arg(long, conflicts_with = "alpha_deg")]
+    pub output_width: Option<u32>,
+    /// Allowed parallax angle α in degrees instead of an output view.
+    #[arg(long, allow_hyphen_values = true)]
+    pub alpha_deg: Option<f64>,
+    /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
+    #[arg(long, default_value_t = 8)]
+    pub micro_grid: u32,
+    /// Minimum opaque fraction while a micro-texture grows.
+    #[arg(long, default_value_t = 0.6, allow_hyphen_values = true)]
+    pub micro_threshold: f64,
+    /// Bake only shard K of N (`K/N`, 0 ≤ K < N), e.g. `--shard $JOB_COMPLETION_INDEX/8`.
+    #[arg(long, value_parser = parse_shard)]
+    pub shard: Option<Shard>,
+    /// GPU backend: auto, vulkan or gl.
+    #[arg(long, default_value = "auto")]
+    pub backend: String,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Default output view (as `lemi layers`).
+const DEFAULT_FOV_DEG: f64 = 60.0;
+const DEFAULT_WIDTH: u32 = 1280;
+
+fn parse_region(s: &str) -> Result<Aabb, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{s}`: {e}"))?;
+    if v.len() != 6 || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "`{s}`: expected six finite numbers x0,y0,z0,x1,y1,z1"
+        ));
+    }
+    let a = DVec3::new(v[0], v[1], v[2]);
+    let b = DVec3::new(v[3], v[4], v[5]);
+    Ok(Aabb::new(a.min(b), a.max(b)))
+}
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    Shard::parse(s).map_err(|e| e.to_string())
+}
+
+/// Per-cell line of the summary.
+#[derive(serde::Serialize)]
+struct CellSummary {
+    id: String,
+    status: &'static str,
+    seconds: f64,
+    bytes: u64,
+    #[serde(flatten)]
+    stats: CellStats,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if let Some(bundle) = &args.merge {
+        let m = lemi_bake::merge(bundle)?;
+        if args.json {
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&json!({
+                    "merged": bundle,
+                    "cells": m.cells.len(),
+                    "bytes": m.cells.iter().map(|c| c.bytes).sum::<u64>(),
+                }))?
+            );
+        } else {
+            println!(
+                "merged     {} cells into {}",
+                m.cells.len(),
+                lemi_core::bundle::manifest_path(bundle).display()
+            );
+        }
+        return Ok(());
+    }
+    let Some(out) = args.out.clone() else {
+        bail!("-o BUNDLE is required");
+    };
+    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    let faces: Vec<Face> = match args.faces {
+        4 => Face::HORIZONTAL.to_vec(),
+        6 => Face::ALL.to_vec(),
+        n => bail!("--faces must be 4 (horizontal) or 6 (all), got {n}"),
+    };
+    if !(args.cell_size.is_finite() && args.cell_size > 0.0) {
+        bail!(
+            "--cell-size must be a positive number of metres (got {})",
+            args.cell_size
+        );
+    }
+    let target = match (args.layers, args.near_field) {
+        (_, Some(d)) => LayerTarget::NearField(d),
+        (Some(n), None) => LayerTarget::Layers(n),
+        (None, None) => LayerTarget::Layers(64),
+    };
+    let (alpha, fov, width) = match args.alpha_deg {
+        Some(a) => {
+            if !(a.is_finite() && a > 0.0 && a < 20.0) {
+                bail!("--alpha-deg must be in (0, 20) degrees, got {a}");
+            }
+            (a.to_radians(), None, None)
+        }
+        None => {
+            let fov = args.output_fov.unwrap_or(DEFAULT_FOV_DEG);
+            let width = args.output_width.unwrap_or(DEFAULT_WIDTH);
+            if !(fov.is_finite() && fov > 0.0 && fov < 180.0) {
+                bail!("--output-fov must be in (0, 180) degrees, got {fov}");
+            }
+            let a = alpha_from_output_view(fov.to_radians(), width, PixelChoice::Edge)
+                .context("--output-fov/--output-width")?;
+            (a, Some(fov), Some(width))
+        }
+    };
+    let params = BakeParams {
+        cell_size: args.cell_size,
+        resolution: args.resolution,
+        target,
+        faces,
+        alpha,
+        output_fov_deg: fov,
+        output_width: width,
+        micro_grid: args.micro_grid,
+        micro_threshold: args.micro_threshold,
+    };
+    lemi_bake::validate_params(&params)?;
+    let mut warnings = Vec::new();
+    if let (Some(f), Some(w)) = (fov, width) {
+        if let Ok(min) = min_face_res_for_output_view(f.to_radians(), w) {
+            if args.resolution < min {
+                warnings.push(format!(
+                    "--resolution {} is below the {min} texels per face at which a layer texel \
+                     subtends at most one pixel of the {w} px, {f}° output view: impostors will \
+                     look blurrier than the geometry (the one-pixel guarantee assumes no magnification)",
+                    args.resolution
+                ));
+            }
+        }
+    }
+
+    let scene_args = SceneArgs {
+        scenes: args.scenes.clone(),
+        up: args.up,
+    };
+    let (scene, load_s) = load_scene(&scene_args, args.json)?;
+    let fingerprint = lemi_scene::fingerprint(&args.scenes, args.up.into())
+        .context("fingerprinting the scene")?;
+    let region = match args.region {
+        Some(r) => r,
+        None => {
+            if !args.eye_height.is_finite() {
+                bail!("--eye-height must be finite (got {})", args.eye_height);
+            }
+            let b = scene.bounds;
+            let y = b.min.y + args.eye_height;
+            Aabb::new(
+                DVec3::new(b.min.x, y, b.min.z),
+                DVec3::new(b.max.x, y, b.max.z),
+            )
+        }
+    };
+    let grid = CellGrid::tile(region, args.cell_size).context("--region/--cell-size")?;
+    let cells: Vec<ViewCell> = if args.cells.is_empty() {
+        grid.cells()
+    } else {
+        let mut v = Vec::new();
+        for id in &args.cells {
+            let c = grid.parse_id(id).with_context(|| {
+                format!(
+                    "--cells: the grid has {}x{}x{} cells (ids 0_0_0 to {}_{}_{})",
+                    grid.counts.x,
+                    grid.counts.y,
+                    grid.counts.z,
+                    grid.counts.x - 1,
+                    grid.counts.y - 1,
+                    grid.counts.z - 1
+                )
+            })?;
+            if !v.contains(&c) {
+                v.push(c);
+            }
+        }
+        v
+    };
+    let job = BakeJob {
+        bundle: out.clone(),
+        scene: SceneRef {
+            sources: args.scenes.clone(),
+            up: match args.up {
+                UpArg::Y => "y".into(),
+                UpArg::Z => "z".into(),
+            },
+            fingerprint,
+            triangles: scene.triangle_count(),
+        },
+        params: params.clone(),
+        grid,
+        cells,
+        shard: args.shard,
+    };
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+
+    let gpu = Gpu::new(backend)?;
+    let t_prep = Instant::now();
+    let baker = Baker::new(&gpu, &scene, params.clone())?;
+    let prep_s = t_prep.elapsed().as_secs_f64();
+    let mine = match job.shard {
+        Some(s) => s.select(&job.cells).len(),
+        None => job.cells.len(),
+    };
+    let bar = if args.json {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(mine as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} cells  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let stage_bar = bar.clone();
+    let summary = lemi_bake::run(
+        &job,
+        |cell| {
+            let id = cell.id();
+            baker.bake(cell, |stage| {
+                stage_bar.set_message(format!("cell {id}: {stage}"));
+            })
+        },
+        |_, _, outcome| {
+            bar.inc(1);
+            if let CellOutcome::Baked { entry, seconds, .. } = outcome {
+                bar.println(format!(
+                    "baked      cell {} in {seconds:.1} s ({} bytes)",
+                    entry.id, entry.bytes
+                ));
+            }
+        },
+    )?;
+    bar.finish_and_clear();
+
+    let mut per_cell = Vec::new();
+    let mut total = CellStats::default();
+    let (mut baked, mut skipped) = (0, 0);
+    for o in &summary.outcomes {
+        match o {
+            CellOutcome::Baked {
+                entry,
+                file,
+                seconds,
+            } => {
+                baked += 1;
+                add(&mut total, &file.header.stats);
+                per_cell.push(CellSummary {
+                    id: entry.id.clone(),
+                    status: "baked",
+                    seconds: *seconds,
+                    bytes: entry.bytes,
+                    stats: file.header.stats.clone(),
+                });
+            }
+            CellOutcome::Skipped { entry } => {
+                skipped += 1;
+                let stats = lemi_core::bundle::CellFile::read(&out.join(&entry.file))
+                    .map(|f| f.header.stats)
+                    .unwrap_or_default();
+                add(&mut total, &stats);
+                per_cell.push(CellSummary {
+                    id: entry.id.clone(),
+                    status: "skipped (already baked)",
+                    seconds: 0.0,
+                    bytes: entry.bytes,
+                    stats,
+                });
+            }
+        }
+    }
+    let bytes: u64 = per_cell.iter().map(|c| c.bytes).sum();
+    if args.json {
+        let out_json = json!({
+            "bundle": out,
+            "record": summary.record,
+            "adapter": gpu.info().name,
+            "cells": per_cell.len(),
+            "baked": baked,
+            "skipped": skipped,
+            "seconds": summary.seconds,
+            "load_seconds": load_s,
+            "prepare_seconds": prep_s,
+            "bytes": bytes,
+            "raw_bytes": total.raw_bytes,
+            "macro_bytes": total.macro_bytes,
+            "png_bytes": total.png_bytes,
+            "far_triangles": total.far_triangles,
+            "near_triangles": total.near_triangles,
+            "submitted_triangles": total.submitted_triangles,
+            "micro_textures": total.micro_textures,
+            "macro_textures": total.macro_textures,
+            "stage_seconds": total.seconds,
+            "warnings": warnings,
+            "per_cell": per_cell,
+        });
+        println!("{}", serde_json::to_string_pretty(&out_json)?);
+        return Ok(());
+    }
+    println!("lemi bake");
+    println!(
+        "scene      {}: {} triangles, loaded in {load_s:.2} s",
+        args.scenes.join(" "),
+        scene.triangle_count()
+    );
+    println!("adapter    {}", gpu.describe());
+    println!(
+        "cells      {} ({} baked, {} skipped as already baked) of a {}x{}x{} grid of {} m cells",
+        per_cell.len(),
+        baked,
+        skipped,
+        job.grid.counts.x,
+        job.grid.counts.y,
+        job.grid.counts.z,
+        params.cell_size
+    );
+    let n = per_cell.len().max(1) as f64;
+    println!(
+        "triangles  per cell: {:.0} far, {:.0} near, {:.0} submitted to the recorder ({:.2}x the far ones)",
+        total.far_triangles as f64 / n,
+        total.near_triangles as f64 / n,
+        total.submitted_triangles as f64 / n,
+        total.submitted_triangles as f64 / total.far_triangles.max(1) as f64
+    );
+    println!(
+        "bytes      per cell: raw layers {}, macro-textures {}, PNG {}; {} micro-textures in {} macro-textures",
+        human(total.raw_bytes as f64 / n),
+        human(total.macro_bytes as f64 / n),
+        human(total.png_bytes as f64 / n),
+        total.micro_textures,
+        total.macro_textures
+    );
+    let stages: Vec<String> = total
+        .seconds
+        .iter()
+        .map(|(k, v)| format!("{k} {:.2}", v / baked.max(1) as f64))
+        .collect();
+    if baked > 0 {
+        println!("seconds    per baked cell: {}", stages.join(", "));
+    }
+    println!(
+        "time       {:.1} s in all (load {load_s:.1} s, prepare {prep_s:.1} s)",
+        summary.seconds
+    );
+    println!(
+        "wrote      {} ({} in cell files)",
+        summary.record.display(),
+        human(bytes as f64)
+    );
+    if job.shard.is_some() {
+        println!(
+            "next       when every shard is done: lemi bake --merge {}",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Adds the statistics of a cell to a running total (seconds by stage name).
+fn add(total: &mut CellStats, s: &CellStats) {
+    total.far_triangles += s.far_triangles;
+    total.near_triangles += s.near_triangles;
+    total.submitted_triangles += s.submitted_triangles;
+    total.raw_bytes += s.raw_bytes;
+    total.opaque_texels_recorded += s.opaque_texels_recorded;
+    total.opaque_texels_after_gap_fill += s.opaque_texels_after_gap_fill;
+    total.opaque_texels_after_hidden_removal += s.opaque_texels_after_hidden_removal;
+    total.micro_textures += s.micro_textures;
+    total.macro_textures += s.macro_textures;
+    total.macro_bytes += s.macro_bytes;
+    total.png_bytes += s.png_bytes;
+    for (k, v) in &s.seconds {
+        match total.seconds.iter_mut().find(|(n, _)| n == k) {
+            Some((_, t)) => *t += v,
+            None => total.seconds.push((k.clone(), *v)),
+        }
+    }
+}
+
+/// Bytes with a binary-ish unit, for humans.
+pub fn human(b: f64) -> String {
+    if b >= 1e9 {
+        format!("{:.2} GB", b / 1e9)
+    } else if b >= 1e6 {
+        format!("{:.1} MB", b / 1e6)
+    } else if b >= 1e3 {
+        format!("{:.0} KB", b / 1e3)
+    } else {
+        format!("{b:.0} B")
+    }
+}

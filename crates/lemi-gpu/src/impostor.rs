@@ -1,0 +1,899 @@
+//! The impostor renderer: what the runtime shows for one baked view cell. The cell's near geometry
+//! is drawn as real triangles, the far field as the cell's layered impostor quads, both in one pass.
+//!
+//! Based on the runtime of *Layered Environment-Map Impostors for Arbitrary Scenes* (Jeschke,
+//! Wimmer et al., GI 2002, sec. 3): inside a view cell the viewer sees the near geometry plus, per
+//! cube face, concentric layers of textured quads; the quads are alpha-tested (a layer only holds
+//! what its slab contains) and depth-tested against each other and the near geometry, so no sorting
+//! or blending is needed.
+//!
+//! - Near geometry: the triangles of the cell's near list are copied out of the scene (vertices
+//!   re-indexed per source mesh), uploaded with [`GpuGeometry::upload`] against the scene's
+//!   materials, and drawn with the reference renderer's shader source and pipeline state (shared
+//!   shading module, no culling, reverse-Z `Greater`), so they are shaded bit-identically to
+//!   [`crate::Renderer`].
+//! - Quads: unlit. Macro-texture texels are final sRGB-encoded colours: they are uploaded as
+//!   `Rgba8UnormSrgb` and sampled with **nearest** filtering, no mipmaps, clamp-to-edge, so the sRGB
+//!   decode on sampling and the encode on store round-trip bit-exactly. Fragments whose texel alpha
+//!   is below [`QUAD_ALPHA_CUTOFF`] are discarded. Texture coordinates of a corner are
+//!   [`Quad::macro_texel_corners`] divided by the macro-texture size (this undoes the 90° turn of
+//!   rotated micro-textures). Positions are made relative to the eye before the projection, like
+//!   the shading module does, so world coordinates of thousands of metres stay precise. No
+//!   back-face culling.
+//! - One vertex/index buffer holds all quads of a cell, sorted by macro-texture and, within one,
+//!   near layers first (a quad's `layer` counts far to near), so each macro-texture is one draw
+//!   call with one bind group. Draw order: near geometry, then the macro-textures nearest layer
+//!   first, which lets early depth rejection skip hidden far texels.
+//! - Targets, formats and readback are those of [`crate::Renderer::render`]: sRGB colour, the
+//!   linear view depth as the bits of an f32 in an `R32Uint` target, a `Depth32Float` reverse-Z
+//!   depth buffer, background set to [`RenderOptions::clear`] and depth `f32::INFINITY`.
+
+use std::sync::{Arc, Mutex};
+
+use bytemuck::{Pod, Zeroable};
+use lemi_core::bundle::Quad;
+use lemi_core::camera::View;
+use lemi_core::compress::MacroTexture;
+use lemi_core::{Mesh, Scene};
+use wgpu::util::DeviceExt;
+
+use crate::renderer::{
+    padded_bytes_per_row, read_rows, Frame, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT,
+    VIEW_DEPTH_FORMAT,
+};
+use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
+use crate::shading::{vertex_layout, ShadingGlobals, SHADING_WGSL};
+use crate::{Gpu, GpuError};
+
+/// The reference renderer's entry points: the near geometry is drawn with exactly this source.
+const RENDER_WGSL: &str = include_str!("render.wgsl");
+/// The quad entry points, appended to the shading module.
+const IMPOSTOR_WGSL: &str = include_str!("impostor.wgsl");
+
+/// Quad fragments whose macro-texel alpha (0..=1) is below this are discarded.
+pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+
+/// One quad corner on the GPU: world position and macro-texture coordinates (20 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+struct QuadVertex {
+    position: [f32; 3],
+    uv: [f32; 2],
+}
+
+const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![
+    0 => Float32x3,
+    1 => Float32x2,
+];
+
+fn quad_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<QuadVertex>() as wgpu::BufferAddress,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &QUAD_ATTRIBUTES,
+    }
+}
+
+/// Group 1 of the quad pipeline: macro-texture (binding 3) and its nearest sampler (binding 4).
+/// Created by both [`ImpostorCell::upload`] and [`ImpostorRenderer::new`]; wgpu deduplicates equal
+/// layouts, and WebGPU makes equal layouts compatible in any case.
+fn macro_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("lemi macro-texture"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                count: None,
+            },
+        ],
+    })
+}
+
+/// One draw call: the quads of one macro-texture, a contiguous index range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct MacroDraw {
+    macro_index: u32,
+    first_index: u32,
+    index_count: u32,
+}
+
+/// GPU resources of one baked cell: its near geometry, its macro-textures and its quads.
+pub struct ImpostorCell {
+    near: GpuScene,
+    /// Vertex and index buffer of all quads; `None` without quads.
+    quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    /// One bind group per macro-texture, in the cell's order.
+    macro_groups: Vec<wgpu::BindGroup>,
+    /// Draw calls in draw order (nearest layer first).
+    draws: Vec<MacroDraw>,
+    quad_count: usize,
+    texture_bytes: u64,
+}
+
+impl ImpostorCell {
+    /// `materials`: the scene's materials uploaded once ([`GpuMaterials::upload`]); `scene`: the
+    /// scene the cell was baked from; `near`: the cell's near list, (mesh index, triangle index)
+    /// pairs into `scene.meshes` (out-of-range pairs are [`GpuError::Invalid`] naming the pair;
+    /// triangles whose vertex indices are out of range are skipped, as [`GpuGeometry::upload`]
+    /// does); `quads` and `macros`: from the cell file (a `macro_index` out of range, an empty
+    /// `rect` or one outside its macro-texture, non-finite corners and macro-textures whose data
+    /// does not match their size are [`GpuError::Invalid`]; macro-textures larger than the
+    /// adapter's texture limit are [`GpuError::Limit`]).
+    ///
+    /// All input is checked before any GPU work.
+    pub fn upload(
+        gpu: &Gpu,
+        materials: Arc<GpuMaterials>,
+        scene: &Scene,
+        near: &[[u32; 2]],
+        quads: &[Quad],
+        macros: &[MacroTexture],
+    ) -> Result<ImpostorCell, GpuError> {
+        let near_meshes = near_meshes(scene, near)?;
+        let max_dim = gpu.limits().max_texture_dimension_2d;
+        let mut texture_bytes = 0u64;
+        for (i, m) in macros.iter().enumerate() {
+            let expected = m.width as u64 * m.height as u64 * 4;
+            if m.width == 0 || m.height == 0 || m.rgba.len() as u64 != expected {
+                return Err(GpuError::Invalid(format!(
+                    "macro-texture {i} is {}x{} but has {} bytes of RGBA8 data (expected {expected})",
+                    m.width,
+                    m.height,
+                    m.rgba.len()
+                )));
+            }
+            if m.width > max_dim || m.height > max_dim {
+                return Err(GpuError::Limit(format!(
+                    "macro-texture {i} is {}x{}, larger than this adapter's textures ({max_dim} per side)",
+                    m.width, m.height
+                )));
+            }
+            texture_bytes += expected;
+        }
+        let QuadGeometry {
+            vertices,
+            indices,
+            draws,
+        } = quad_geometry(quads, macros)?;
+        let limits = gpu.limits();
+        let vertex_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
+        let index_bytes = std::mem::size_of_val(indices.as_slice()) as u64;
+        if vertex_bytes.max(index_bytes) > limits.max_buffer_size {
+            return Err(GpuError::Limit(format!(
+                "{} quads need a {} byte buffer, more than this adapter's {} bytes",
+                quads.len(),
+                vertex_bytes.max(index_bytes),
+                limits.max_buffer_size
+            )));
+        }
+        let geometry = GpuGeometry::upload(gpu, &near_meshes, &UploadOptions::default())?;
+        let near = GpuScene::from_parts(materials, geometry)?;
+        let (quad_buffers, macro_groups) = gpu.scoped("uploading impostor quads", || {
+            let device = &gpu.device;
+            let quad_buffers = (!indices.is_empty()).then(|| {
+                let v = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad vertices"),
+                    contents: bytemuck::cast_slice(&vertices),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+                let i = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad indices"),
+                    contents: bytemuck::cast_slice(&indices),
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+                (v, i)
+            });
+            let layout = macro_layout(device);
+            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("lemi macro-texture sampler"),
+                address_mode_u: wgpu::AddressMode::ClampToEdge,
+                address_mode_v: wgpu::AddressMode::ClampToEdge,
+                address_mode_w: wgpu::AddressMode::ClampToEdge,
+                mag_filter: wgpu::FilterMode::Nearest,
+                min_filter: wgpu::FilterMode::Nearest,
+                mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+                ..Default::default()
+            });
+            let groups: Vec<wgpu::BindGroup> = macros
+                .iter()
+                .enumerate()
+                .map(|(i, m)| {
+                    let label = format!("lemi macro-texture {i}");
+                    let view = upload_macro(gpu, &label, m);
+                    device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some(&label),
+                        layout: &layout,
+                        entries: &[
+                            wgpu::BindGroupEntry {
+                                binding: 3,
+                                resource: wgpu::BindingResource::TextureView(&view),
+                            },
+                            wgpu::BindGroupEntry {
+                                binding: 4,
+                                resource: wgpu::BindingResource::Sampler(&sampler),
+                            },
+                        ],
+                    })
+                })
+                .collect();
+            (quad_buffers, groups)
+        })?;
+        Ok(ImpostorCell {
+            near,
+            quad_buffers,
+            macro_groups,
+            draws,
+            quad_count: quads.len(),
+            texture_bytes,
+        })
+    }
+
+    /// Triangles of the near geometry on the GPU.
+    pub fn near_triangles(&self) -> u64 {
+        self.near.triangle_count()
+    }
+
+    /// Impostor quads of the cell.
+    pub fn quad_count(&self) -> usize {
+        self.quad_count
+    }
+
+    /// Bytes of macro-texture data on the GPU (RGBA8, no mipmaps).
+    pub fn texture_bytes(&self) -> u64 {
+        self.texture_bytes
+    }
+
+    /// Draw calls the quads take (one per macro-texture that has quads).
+    pub fn quad_draw_calls(&self) -> usize {
+        self.draws.len()
+    }
+}
+
+/// Copies the triangles of the near list out of `scene`, one mesh per referenced source mesh (same
+/// material, vertices re-indexed, triangles in near-list order).
+fn near_meshes(scene: &Scene, near: &[[u32; 2]]) -> Result<Vec<Mesh>, GpuError> {
+    for (k, &[m, t]) in near.iter().enumerate() {
+        let Some(mesh) = scene.meshes.get(m as usize) else {
+            return Err(GpuError::Invalid(format!(
+                "near list entry {k} (mesh {m}, triangle {t}) names a mesh past the scene's {} meshes",
+                scene.meshes.len()
+            )));
+        };
+        if t as usize >= mesh.triangle_count() {
+            return Err(GpuError::Invalid(format!(
+                "near list entry {k} (mesh {m}, triangle {t}) names a triangle past mesh {m}'s {} triangles",
+                mesh.triangle_count()
+            )));
+        }
+    }
+    let mut order: Vec<[u32; 2]> = near.to_vec();
+    order.sort_by_key(|p| p[0]); // stable: near-list order within a mesh
+    let mut out = Vec::new();
+    let mut remap: Vec<u32> = Vec::new();
+    for group in order.chunk_by(|a, b| a[0] == b[0]) {
+        let Some(src) = group.first().and_then(|p| scene.meshes.get(p[0] as usize)) else {
+            continue;
+        };
+        remap.clear();
+        remap.resize(src.vertices.len(), u32::MAX);
+        let mut mesh = Mesh {
+            material: src.material,
+            vertices: Vec::new(),
+            indices: Vec::with_capacity(group.len() * 3),
+        };
+        for &[_, t] in group {
+            let t = t as usize;
+            let Some(tri) = src.indices.get(3 * t..3 * t + 3) else {
+                continue;
+            };
+            if tri.iter().any(|&i| i as usize >= src.vertices.len()) {
+                continue;
+            }
+            for &i in tri {
+                let i = i as usize;
+                if remap[i] == u32::MAX {
+                    remap[i] = mesh.vertices.len() as u32;
+                    mesh.vertices.push(src.vertices[i]);
+                }
+                mesh.indices.push(remap[i]);
+            }
+        }
+        if !mesh.indices.is_empty() {
+            out.push(mesh);
+        }
+    }
+    Ok(out)
+}
+
+/// The quads of a cell on the CPU: shared vertex/index arrays and the draw calls in draw order.
+struct QuadGeometry {
+    vertices: Vec<QuadVertex>,
+    indices: Vec<u32>,
+    draws: Vec<MacroDraw>,
+}
+
+/// Checks the quads against `macros` and builds their [`QuadGeometry`] (see the module docs for
+/// the order).
+fn quad_geometry(quads: &[Quad], macros: &[MacroTexture]) -> Result<QuadGeometry, GpuError> {
+    if quads.len() > (u32::MAX / 6) as usize {
+        return Err(GpuError::Limit(format!(
+            "{} quads are more than one cell can index",
+            quads.len()
+        )));
+    }
+    for (k, q) in quads.iter().enumerate() {
+        let Some(m) = macros.get(q.macro_index as usize) else {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} uses macro-texture {} but the cell has {} macro-textures",
+                q.macro_index,
+                macros.len()
+            )));
+        };
+        let [x, y, w, h] = q.rect;
+        if w == 0
+            || h == 0
+            || x as u64 + w as u64 > m.width as u64
+            || y as u64 + h as u64 > m.height as u64
+        {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} has texel rectangle {:?} (x, y, w, h), empty or outside its {}x{} macro-texture {}",
+                q.rect, m.width, m.height, q.macro_index
+            )));
+        }
+        if !q.corners.iter().flatten().all(|c| c.is_finite()) {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} has non-finite corners {:?}",
+                q.corners
+            )));
+        }
+    }
+    // Macro-texture ascending, then nearest layer first.
+    let mut order: Vec<usize> = (0..quads.len()).collect();
+    order.sort_by_key(|&k| (quads[k].macro_index, std::cmp::Reverse(quads[k].layer)));
+    let mut vertices = Vec::with_capacity(4 * quads.len());
+    let mut indices = Vec::with_capacity(6 * quads.len());
+    let mut draws: Vec<(u16, MacroDraw)> = Vec::new();
+    for &k in &order {
+        let q = &quads[k];
+        let Some(m) = macros.get(q.macro_index as usize) else {
+            continue;
+        };
+        let (mw, mh) = (m.width as f64, m.height as f64);
+        let base = vertices.len() as u32;
+        for (corner, texel) in q.corners.iter().zip(q.macro_texel_corners()) {
+            vertices.push(QuadVertex {
+                position: *corner,
+                uv: [(texel[0] as f64 / mw) as f32, (texel[1] as f64 / mh) as f32],
+            });
+        }
+        let first = indices.len() as u32;
+        indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
+        match draws.last_mut() {
+            Some((_, d)) if d.macro_index == q.macro_index => d.index_count += 6,
+            // The first quad of a macro-texture has its nearest layer.
+            _ => draws.push((
+                q.layer,
+                MacroDraw {
+                    macro_index: q.macro_index,
+                    first_index: first,
+                    index_count: 6,
+                },
+            )),
+        }
+    }
+    // Macro-textures holding nearer layers first (stable: by index on ties).
+    draws.sort_by_key(|(layer, _)| std::cmp::Reverse(*layer));
+    Ok(QuadGeometry {
+        vertices,
+        indices,
+        draws: draws.into_iter().map(|(_, d)| d).collect(),
+    })
+}
+
+/// Uploads one macro-texture as a single-level `Rgba8UnormSrgb` texture.
+fn upload_macro(gpu: &Gpu, label: &str, m: &MacroTexture) -> wgpu::TextureView {
+    let size = wgpu::Extent3d {
+        width: m.width,
+        height: m.height,
+        depth_or_array_layers: 1,
+    };
+    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    gpu.queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture: &texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        &m.rgba,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * m.width),
+            rows_per_image: Some(m.height),
+        },
+        size,
+    );
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+struct Targets {
+    width: u32,
+    height: u32,
+    color: wgpu::Texture,
+    view_depth: wgpu::Texture,
+    depth: wgpu::Texture,
+    color_readback: wgpu::Buffer,
+    depth_readback: wgpu::Buffer,
+}
+
+fn make_targets(device: &wgpu::Device, width: u32, height: u32) -> Targets {
+    let size = wgpu::Extent3d {
+        width,
+        height,
+        depth_or_array_layers: 1,
+    };
+    let tex = |label: &str, format, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
+    let readback = |label: &str| {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: padded_bytes_per_row(width, 4) as u64 * height as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    };
+    Targets {
+        width,
+        height,
+        color: tex("lemi impostor colour", COLOR_FORMAT, rt),
+        view_depth: tex("lemi impostor view depth", VIEW_DEPTH_FORMAT, rt),
+        depth: tex(
+            "lemi impostor depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        ),
+        color_readback: readback("lemi impostor colour readback"),
+        depth_readback: readback("lemi impostor depth readback"),
+    }
+}
+
+/// Draws [`ImpostorCell`]s: the reference pipeline for near geometry, the quad pipeline, globals
+/// and cached render targets.
+pub struct ImpostorRenderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    near_pipeline: wgpu::RenderPipeline,
+    quad_pipeline: wgpu::RenderPipeline,
+    globals: wgpu::Buffer,
+    globals_group: wgpu::BindGroup,
+    max_dim: u32,
+    targets: Mutex<Option<Targets>>,
+}
+
+impl ImpostorRenderer {
+    pub fn new(gpu: &Gpu) -> Result<ImpostorRenderer, GpuError> {
+        gpu.scoped("creating the impostor render pipelines", || {
+            let device = &gpu.device;
+            let color_targets = [
+                Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                }),
+                Some(wgpu::ColorTargetState {
+                    format: VIEW_DEPTH_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                }),
+            ];
+            let depth_stencil = Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            });
+            let primitive = wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            };
+            // Near geometry: the reference renderer's exact source and state.
+            let near_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                source: wgpu::ShaderSource::Wgsl(format!("{SHADING_WGSL}\n{RENDER_WGSL}").into()),
+            });
+            let near_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
+                immediate_size: 0,
+            });
+            let near_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                layout: Some(&near_layout),
+                vertex: wgpu::VertexState {
+                    module: &near_module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
+                primitive,
+                depth_stencil: depth_stencil.clone(),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &near_module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &color_targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            // Quads.
+            let quad_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi impostor renderer: quads"),
+                source: wgpu::ShaderSource::Wgsl(format!("{SHADING_WGSL}\n{IMPOSTOR_WGSL}").into()),
+            });
+            let macro_layout = macro_layout(device);
+            let quad_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi impostor renderer: quads"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(&macro_layout)],
+                immediate_size: 0,
+            });
+            let quad_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("lemi impostor renderer: quads"),
+                layout: Some(&quad_layout),
+                vertex: wgpu::VertexState {
+                    module: &quad_module,
+                    entry_point: Some("vs_quad"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(quad_vertex_layout())],
+                },
+                primitive,
+                depth_stencil,
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &quad_module,
+                    entry_point: Some("fs_quad"),
+                    compilation_options: Default::default(),
+                    targets: &color_targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            let globals = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lemi impostor globals"),
+                size: std::mem::size_of::<ShadingGlobals>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let globals_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lemi impostor globals"),
+                layout: gpu.globals_layout(),
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: globals.as_entire_binding(),
+                }],
+            });
+            ImpostorRenderer {
+                device: gpu.device.clone(),
+                queue: gpu.queue.clone(),
+                near_pipeline,
+                quad_pipeline,
+                globals,
+                globals_group,
+                max_dim: gpu.limits().max_texture_dimension_2d,
+                targets: Mutex::new(None),
+            }
+        })
+    }
+
+    /// Renders the cell from `view`: its near geometry (shaded exactly like [`crate::Renderer`],
+    /// including `options.alpha_cutoff`), then its impostor quads, in one pass, and reads the
+    /// colour and depth images back (background: `options.clear`, depth `f32::INFINITY`).
+    pub fn render(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<Frame, GpuError> {
+        self.render_parts(cell, view, options, true)
+    }
+
+    /// Like [`ImpostorRenderer::render`] but only the impostor quads, without the near geometry.
+    pub fn render_impostors_only(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<Frame, GpuError> {
+        self.render_parts(cell, view, options, false)
+    }
+
+    fn render_parts(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+        with_near: bool,
+    ) -> Result<Frame, GpuError> {
+        let (width, height) = (view.width, view.height);
+        if width == 0 || height == 0 || width > self.max_dim || height > self.max_dim {
+            return Err(GpuError::Limit(format!(
+                "image size {width}x{height} is outside what this adapter renders (1..={} per side)",
+                self.max_dim
+            )));
+        }
+        let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
+        globals.params[1] = QUAD_ALPHA_CUTOFF;
+        let near = &cell.near;
+        for chunk in near.geometry.chunks() {
+            if near.materials.bind_group(chunk.material).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "near geometry uses material {} but only {} materials were uploaded",
+                    chunk.material,
+                    near.materials.len()
+                )));
+            }
+        }
+        for d in &cell.draws {
+            if cell.macro_groups.get(d.macro_index as usize).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "quads use macro-texture {} but only {} were uploaded",
+                    d.macro_index,
+                    cell.macro_groups.len()
+                )));
+            }
+        }
+        let mut guard = self
+            .targets
+            .lock()
+            .map_err(|_| GpuError::Readback("render target cache poisoned".into()))?;
+        if guard
+            .as_ref()
+            .is_none_or(|t| t.width != width || t.height != height)
+        {
+            *guard = Some(crate::device::scoped(
+                &self.device,
+                "creating impostor render targets",
+                || make_targets(&self.device, width, height),
+            )?);
+        }
+        let Some(targets) = guard.as_ref() else {
+            return Err(GpuError::Readback("render targets missing".into()));
+        };
+        crate::device::scoped(&self.device, "rendering impostors", || {
+            self.queue
+                .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+            let mut encoder = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("lemi impostor render"),
+                });
+            let color_view = targets.color.create_view(&Default::default());
+            let vdepth_view = targets.view_depth.create_view(&Default::default());
+            let depth_view = targets.depth.create_view(&Default::default());
+            {
+                let clear = wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                };
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("lemi impostor pass"),
+                    color_attachments: &[
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &color_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                        Some(wgpu::RenderPassColorAttachment {
+                            view: &vdepth_view,
+                            depth_slice: None,
+                            resolve_target: None,
+                            ops: clear,
+                        }),
+                    ],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth_view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(0.0),
+                            store: wgpu::StoreOp::Discard,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: None,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                if with_near && !near.geometry.chunks().is_empty() {
+                    pass.set_pipeline(&self.near_pipeline);
+                    pass.set_bind_group(0, &self.globals_group, &[]);
+                    let mut bound = None;
+                    for chunk in near.geometry.chunks() {
+                        if bound != Some(chunk.material) {
+                            if let Some(g) = near.materials.bind_group(chunk.material) {
+                                pass.set_bind_group(1, g, &[]);
+                            }
+                            bound = Some(chunk.material);
+                        }
+                        pass.set_vertex_buffer(0, chunk.vertices.slice(..));
+                        pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
+                        pass.draw_indexed(0..chunk.index_count, 0, 0..1);
+                    }
+                }
+                if let Some((vertices, indices)) = &cell.quad_buffers {
+                    pass.set_pipeline(&self.quad_pipeline);
+                    pass.set_bind_group(0, &self.globals_group, &[]);
+                    pass.set_vertex_buffer(0, vertices.slice(..));
+                    pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                    for d in &cell.draws {
+                        if let Some(g) = cell.macro_groups.get(d.macro_index as usize) {
+                            pass.set_bind_group(1, g, &[]);
+                            pass.draw_indexed(
+                                d.first_index..d.first_index + d.index_count,
+                                0,
+                                0..1,
+                            );
+                        }
+                    }
+                }
+            }
+            for (texture, buffer) in [
+                (&targets.color, &targets.color_readback),
+                (&targets.view_depth, &targets.depth_readback),
+            ] {
+                encoder.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d::ZERO,
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyBufferInfo {
+                        buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(padded_bytes_per_row(width, 4)),
+                            rows_per_image: Some(height),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
+            self.queue.submit([encoder.finish()]);
+        })?;
+        let mut rgba = read_rows(&self.device, &targets.color_readback, width, height)?;
+        let depth_bytes = read_rows(&self.device, &targets.depth_readback, width, height)?;
+        let mut depth: Vec<f32> = depth_bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        // Every drawn fragment writes alpha 1; alpha 0 is the clear.
+        for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
+            if px[3] == 0 {
+                px.copy_from_slice(&options.clear);
+                *d = f32::INFINITY;
+            }
+        }
+        Ok(Frame {
+            width,
+            height,
+            rgba,
+            depth,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lemi_core::Face;
+
+    fn quad(macro_index: u32, layer: u16, rect: [u32; 4]) -> Quad {
+        Quad {
+            face: Face::NegZ,
+            layer,
+            corners: [[0.0; 3]; 4],
+            macro_index,
+            rect,
+            rotated: false,
+        }
+    }
+
+    fn macro_texture(width: u32, height: u32) -> MacroTexture {
+        MacroTexture {
+            width,
+            height,
+            rgba: vec![0; (width * height * 4) as usize],
+        }
+    }
+
+    #[test]
+    fn quads_sort_by_macro_then_nearest_layer_and_draws_nearest_first() {
+        let macros = [macro_texture(8, 8), macro_texture(4, 4)];
+        let quads = [
+            quad(0, 1, [0, 0, 2, 2]),
+            quad(1, 5, [0, 0, 4, 4]),
+            quad(0, 3, [2, 0, 2, 2]),
+            quad(0, 0, [4, 4, 4, 4]),
+        ];
+        let QuadGeometry {
+            vertices: v,
+            indices: i,
+            draws,
+        } = quad_geometry(&quads, &macros).expect("valid quads");
+        assert_eq!(v.len(), 16);
+        assert_eq!(i.len(), 24);
+        // macro 0: layers 3, 1, 0 (indices 0..18); macro 1: layer 5 (18..24), drawn first.
+        assert_eq!(
+            draws,
+            vec![
+                MacroDraw {
+                    macro_index: 1,
+                    first_index: 18,
+                    index_count: 6
+                },
+                MacroDraw {
+                    macro_index: 0,
+                    first_index: 0,
+                    index_count: 18
+                },
+            ]
+        );
+        // first quad of macro 0 is the layer-3 one: rect [2, 0, 2, 2] of 8x8
+        assert_eq!(v[0].uv, [0.25, 0.0]);
+        assert_eq!(v[2].uv, [0.5, 0.25]);
+    }
+
+    #[test]
+    fn bad_rects_are_errors() {
+        let macros = [macro_texture(8, 8)];
+        for rect in [
+            [0, 0, 0, 2],
+            [7, 0, 2, 1],
+            [0, 0, 8, 9],
+            [u32::MAX, 0, 2, 2],
+        ] {
+            let r = quad_geometry(&[quad(0, 0, rect)], &macros);
+            assert!(matches!(r, Err(GpuError::Invalid(_))), "{rect:?}");
+        }
+        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros).is_ok());
+    }
+}

@@ -1,0 +1,51 @@
+// lemi impostor quads (appended to shading.wgsl): the layered far field of one view cell, drawn as
+// textured quads (GI 2002 sec. 3). Unlit: the macro-texture texels are final sRGB colours; the
+// texture format (Rgba8UnormSrgb) decodes them, the colour target re-encodes them, so the round
+// trip is exact. Alpha test against globals.params.y, then the same targets as render.wgsl:
+// Target 0: Rgba8UnormSrgb colour, alpha 1 where drawn. Target 1: R32Uint holding the bits of the
+// f32 linear view depth.
+//
+// Group 1 holds the macro-texture at bindings 3 and 4 so that they never alias the material
+// bindings 0..=2 the shading module declares (unused here).
+
+struct QuadIn {
+    @location(0) position: vec3<f32>,
+    @location(1) uv: vec2<f32>,
+};
+
+struct QuadOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) view_depth: f32,
+};
+
+struct QuadFragmentOut {
+    @location(0) color: vec4<f32>,
+    @location(1) depth: u32,
+};
+
+@group(1) @binding(3) var macro_texture: texture_2d<f32>;
+@group(1) @binding(4) var macro_sampler: sampler;
+
+@vertex
+fn vs_quad(v: QuadIn) -> QuadOut {
+    // Relative to the eye before any matrix product, as transform_vertex does.
+    let rel = eye_relative(v.position);
+    var out: QuadOut;
+    out.clip = globals.clip_from_rel * vec4<f32>(rel, 1.0);
+    out.uv = v.uv;
+    out.view_depth = dot(globals.depth_axis.xyz, rel);
+    return out;
+}
+
+@fragment
+fn fs_quad(in: QuadOut) -> QuadFragmentOut {
+    let t = textureSample(macro_texture, macro_sampler, in.uv);
+    if (t.a < globals.params.y) {
+        discard;
+    }
+    var out: QuadFragmentOut;
+    out.color = vec4<f32>(t.rgb, 1.0);
+    out.depth = bitcast<u32>(in.view_depth);
+    return out;
+}
