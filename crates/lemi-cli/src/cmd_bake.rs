@@ -210,13 +210,27 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
 
+    // Files are recorded by absolute path, so the bundle can be rendered from anywhere.
+    let sources: Vec<String> = args
+        .scenes
+        .iter()
+        .map(|s| {
+            if s.starts_with("builtin:") {
+                s.clone()
+            } else {
+                std::fs::canonicalize(s)
+                    .map(|p| p.to_string_lossy().into_owned())
+                    .unwrap_or_else(|_| s.clone())
+            }
+        })
+        .collect();
     let scene_args = SceneArgs {
-        scenes: args.scenes.clone(),
+        scenes: sources.clone(),
         up: args.up,
     };
     let (scene, load_s) = load_scene(&scene_args, args.json)?;
-    let fingerprint = lemi_scene::fingerprint(&args.scenes, args.up.into())
-        .context("fingerprinting the scene")?;
+    let fingerprint =
+        lemi_scene::fingerprint(&sources, args.up.into()).context("fingerprinting the scene")?;
     let region = match args.region {
         Some(r) => r,
         None => {
@@ -257,7 +271,7 @@ pub fn run(args: Args) -> Result<()> {
     let job = BakeJob {
         bundle: out.clone(),
         scene: SceneRef {
-            sources: args.scenes.clone(),
+            sources,
             up: match args.up {
                 UpArg::Y => "y".into(),
                 UpArg::Z => "z".into(),

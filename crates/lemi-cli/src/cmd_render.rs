@@ -1,6 +1,10 @@
 //! `lemi render SCENE… --eye x,y,z --look x,y,z --fov 60 --size 1280x720 -o out.png`: renders a
 //! scene with the GPU reference renderer (`lemi-gpu`) and writes the image, optionally the depth.
 //!
+//! `lemi render BUNDLE --eye … [--compare]`: renders what the runtime shows from a viewpoint inside
+//! a baked cell: the cell's near geometry plus its impostor quads (alpha test, depth test). With
+//! `--compare` the image is reference | impostor | difference side by side.
+//!
 //! Camera coordinates are lemi's world (+Y up, after any `--up z` conversion of the input), the same
 //! coordinates `lemi info` prints. The view direction is `--look` (a point), `--dir` (a vector) or
 //! `--yaw/--pitch` (degrees; yaw 0 looks along −Z, 90 along +X); with none of them the camera looks
@@ -66,6 +70,15 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// With a BUNDLE: write reference | impostor | difference side by side (difference: black where
+    /// equal, the amplified colour difference elsewhere, red where the reference shows geometry
+    /// and the impostor shows background).
+    #[arg(long)]
+    pub compare: bool,
+    /// With a BUNDLE: the scene to use instead of the manifest's sources (must be the same scene:
+    /// checked against the bundle's fingerprint).
+    #[arg(long = "scene", value_name = "SCENE")]
+    pub scene_override: Vec<String>,
 }
 
 fn parse_numbers(s: &str, n: usize) -> Result<Vec<f64>, String> {
@@ -150,6 +163,12 @@ fn camera(args: &Args, bounds: &lemi_core::Aabb) -> anyhow::Result<Camera> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    if args.scene.scenes.len() == 1 && crate::bundle_view::is_bundle(&args.scene.scenes[0]) {
+        return run_bundle(args, backend);
+    }
+    if args.compare || !args.scene_override.is_empty() {
+        bail!("--compare and --scene need a bundle directory (one with manifest.json) as input");
+    }
     if let Some(d) = &args.depth {
         depth_kind(d)?;
     }
@@ -242,6 +261,238 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("wrote      {}", d.display());
     }
     Ok(())
+}
+
+/// `lemi render BUNDLE`: the impostor view from inside a baked cell.
+fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
+    let bundle = PathBuf::from(&args.scene.scenes[0]);
+    if args.depth.is_some() && args.compare {
+        bail!("--depth and --compare cannot be combined");
+    }
+    let (manifest, scene) = crate::bundle_view::open(&bundle, &args.scene_override, args.json)?;
+    let mut args = args;
+    if args.eye.is_none() {
+        args.eye = crate::bundle_view::first_cell_center(&manifest);
+        if args.look.is_none() && args.dir.is_none() && args.yaw.is_none() {
+            args.dir = Some(DVec3::X);
+        }
+    }
+    let cam = camera(&args, &scene.bounds)?;
+    let (cell, file) = crate::bundle_view::cell_at(&bundle, &manifest, cam.eye)?;
+    let macros = file
+        .decode_macros()
+        .with_context(|| format!("{}: macro-textures", bundle.display()))?;
+    let gpu = Gpu::new(backend)?;
+    let t = Instant::now();
+    let materials = std::sync::Arc::new(
+        lemi_gpu::GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
+            .context("uploading the scene's materials")?,
+    );
+    let impostor_cell = lemi_gpu::ImpostorCell::upload(
+        &gpu,
+        materials,
+        &scene,
+        &file.near,
+        &file.header.quads,
+        &macros,
+    )
+    .context("uploading the cell")?;
+    let upload_seconds = t.elapsed().as_secs_f64();
+    let renderer = lemi_gpu::ImpostorRenderer::new(&gpu)?;
+    let options = RenderOptions {
+        clear: args.clear,
+        ..Default::default()
+    };
+    let view = cam.view();
+    let mut times = Vec::new();
+    let mut frame = None;
+    for _ in 0..args.frames {
+        let t = Instant::now();
+        frame = Some(
+            renderer
+                .render(&impostor_cell, &view, &options)
+                .context("rendering the impostor view")?,
+        );
+        times.push(t.elapsed().as_secs_f64());
+    }
+    let frame = frame.context("no frame rendered")?;
+    times.sort_by(f64::total_cmp);
+    let render_seconds = times[times.len() / 2];
+    let mut comparison = None;
+    if args.compare {
+        let gpu_scene = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
+            .context("uploading the scene for the reference view")?;
+        let reference = Renderer::new(&gpu)?
+            .render(&gpu_scene, &view, &options)
+            .context("rendering the reference view")?;
+        let c = compare(&reference, &frame);
+        save_image(&c.image, &args.output)?;
+        comparison = Some(c);
+    } else {
+        save_rgba(&frame, &args.output)?;
+        if let Some(d) = &args.depth {
+            save_depth(&frame, d)?;
+        }
+    }
+    if args.json {
+        let mut out = json!({
+            "output": args.output,
+            "bundle": bundle,
+            "cell": cell.id(),
+            "adapter": gpu.info().name,
+            "near_triangles": impostor_cell.near_triangles(),
+            "quads": impostor_cell.quad_count(),
+            "texture_bytes": impostor_cell.texture_bytes(),
+            "width": frame.width,
+            "height": frame.height,
+            "eye": cam.eye.to_array(),
+            "forward": cam.forward.to_array(),
+            "fov_y_deg": cam.fov_y_deg,
+            "upload_seconds": upload_seconds,
+            "render_seconds": render_seconds,
+            "frames": args.frames,
+        });
+        if let Some(c) = &comparison {
+            out["compare"] = json!({
+                "differing_pixels": c.differing,
+                "crack_pixels": c.cracks,
+                "reference_covered": c.reference_covered,
+                "impostor_covered": c.impostor_covered,
+                "psnr_db": c.psnr,
+            });
+        }
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("adapter    {}", gpu.describe());
+    println!(
+        "cell       {} of {}: {} near triangles, {} impostor quads, {:.1} MB of macro-textures",
+        cell.id(),
+        bundle.display(),
+        impostor_cell.near_triangles(),
+        impostor_cell.quad_count(),
+        impostor_cell.texture_bytes() as f64 / 1e6
+    );
+    println!(
+        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {}°  {}x{}",
+        cam.eye.x,
+        cam.eye.y,
+        cam.eye.z,
+        cam.forward.x,
+        cam.forward.y,
+        cam.forward.z,
+        cam.fov_y_deg,
+        cam.width,
+        cam.height
+    );
+    if let Some(c) = &comparison {
+        println!("compare    {}", c.summary());
+    }
+    println!(
+        "time       upload {upload_seconds:.2} s, impostor render {render_seconds:.3} s{}",
+        if args.frames > 1 {
+            format!(" (median of {} frames)", args.frames)
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "wrote      {}{}",
+        args.output.display(),
+        if args.compare {
+            " (reference | impostor | difference)"
+        } else {
+            ""
+        }
+    );
+    Ok(())
+}
+
+/// A reference/impostor comparison: the side-by-side image and its numbers.
+pub struct Comparison {
+    pub image: image::RgbaImage,
+    /// Pixels whose colour differs at all.
+    pub differing: u64,
+    /// Pixels where the reference shows geometry and the impostor background.
+    pub cracks: u64,
+    pub reference_covered: u64,
+    pub impostor_covered: u64,
+    /// PSNR over RGB in dB (infinite when identical).
+    pub psnr: f64,
+}
+
+impl Comparison {
+    pub fn summary(&self) -> String {
+        let n = (self.image.width() / 3) as u64 * self.image.height() as u64;
+        format!(
+            "{} of {n} pixels differ ({:.2} %), {} crack pixels (geometry in the reference, \
+             background in the impostor view), PSNR {:.1} dB",
+            self.differing,
+            100.0 * self.differing as f64 / n.max(1) as f64,
+            self.cracks,
+            self.psnr
+        )
+    }
+}
+
+/// Compares a reference and an impostor frame of the same size.
+pub fn compare(reference: &Frame, impostor: &Frame) -> Comparison {
+    let (w, h) = (reference.width, reference.height);
+    let mut img = image::RgbaImage::new(3 * w, h);
+    let (mut differing, mut cracks, mut rc, mut ic) = (0u64, 0u64, 0u64, 0u64);
+    let mut se = 0.0f64;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let r = reference.rgba.get(4 * i..4 * i + 4).unwrap_or(&[0; 4]);
+            let m = impostor.rgba.get(4 * i..4 * i + 4).unwrap_or(&[0; 4]);
+            let rd = reference.depth.get(i).is_some_and(|d| d.is_finite());
+            let md = impostor.depth.get(i).is_some_and(|d| d.is_finite());
+            rc += rd as u64;
+            ic += md as u64;
+            img.put_pixel(x, y, image::Rgba([r[0], r[1], r[2], 255]));
+            img.put_pixel(w + x, y, image::Rgba([m[0], m[1], m[2], 255]));
+            let d: [u8; 3] = std::array::from_fn(|k| r[k].abs_diff(m[k]));
+            for k in 0..3 {
+                se += (d[k] as f64).powi(2);
+            }
+            let diff = if rd && !md {
+                cracks += 1;
+                [255, 0, 0]
+            } else {
+                d.map(|v| v.saturating_mul(4))
+            };
+            if d != [0; 3] || rd != md {
+                differing += 1;
+            }
+            img.put_pixel(2 * w + x, y, image::Rgba([diff[0], diff[1], diff[2], 255]));
+        }
+    }
+    let mse = se / (3.0 * w as f64 * h as f64).max(1.0);
+    Comparison {
+        image: img,
+        differing,
+        cracks,
+        reference_covered: rc,
+        impostor_covered: ic,
+        psnr: if mse == 0.0 {
+            f64::INFINITY
+        } else {
+            10.0 * (255.0f64 * 255.0 / mse).log10()
+        },
+    }
+}
+
+fn save_image(img: &image::RgbaImage, path: &Path) -> anyhow::Result<()> {
+    let ext = extension(path);
+    let result = if ext == "jpg" || ext == "jpeg" {
+        image::DynamicImage::ImageRgba8(img.clone())
+            .to_rgb8()
+            .save(path)
+    } else {
+        img.save(path)
+    };
+    result.with_context(|| format!("writing {} (-o)", path.display()))
 }
 
 fn save_rgba(frame: &Frame, path: &Path) -> anyhow::Result<()> {

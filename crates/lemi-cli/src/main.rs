@@ -1,6 +1,7 @@
 //! `lemi`: the command-line front end. Each subcommand lives in its own `cmd_*.rs` file with an
 //! `Args` struct and a `run` function; the libraries do the work.
 
+mod bundle_view;
 mod cmd_bake;
 mod cmd_demo;
 mod cmd_info;
@@ -26,7 +27,7 @@ enum Command {
     Bake(cmd_bake::Args),
     /// Print triangle/material counts, bounds and import statistics of a scene.
     Info(cmd_info::Args),
-    /// Render a scene from a camera with the GPU reference renderer.
+    /// Render a scene with the reference renderer, or a bundle's impostor view (`--compare`: side by side).
     Render(cmd_render::Args),
     /// Compute the layer placement of a view cell (the error metric).
     Layers(cmd_layers::Args),
