@@ -453,9 +453,7 @@ pub fn compare(reference: &Frame, impostor: &Frame) -> Comparison {
             img.put_pixel(x, y, image::Rgba([r[0], r[1], r[2], 255]));
             img.put_pixel(w + x, y, image::Rgba([m[0], m[1], m[2], 255]));
             let d: [u8; 3] = std::array::from_fn(|k| r[k].abs_diff(m[k]));
-            for k in 0..3 {
-                se += (d[k] as f64).powi(2);
-            }
+            se += d.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
             let diff = if rd && !md {
                 cracks += 1;
                 [255, 0, 0]
