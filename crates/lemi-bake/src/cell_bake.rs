@@ -261,6 +261,7 @@ impl<'a> Baker<'a> {
                 Quad {
                     face: m.face,
                     layer: m.layer as u16,
+                    texels: [m.rect.x0, m.rect.y0, m.rect.x1, m.rect.y1].map(|v| v as u16),
                     corners: m.corners().map(|c| (center + c).as_vec3().to_array()),
                     macro_index: p.macro_index,
                     rect: [p.x, p.y, fw, fh],
@@ -316,7 +317,9 @@ impl<'a> Baker<'a> {
                 cell: *cell,
                 params_hash: params.hash(),
                 scene_fingerprint: String::new(),
+                resolution: res,
                 near_field,
+                faces: params.faces.clone(),
                 layers,
                 quads,
                 macros,

@@ -15,7 +15,7 @@ use crate::container::{self, Blob, ContainerError};
 use crate::Face;
 
 /// Version of the manifest and cell files. Readers reject any other version.
-pub const BUNDLE_VERSION: u32 = 1;
+pub const BUNDLE_VERSION: u32 = 2;
 /// Magic bytes of a cell file.
 pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
 /// `format` field of the manifest.
@@ -105,12 +105,16 @@ pub struct LayerInfo {
     pub far_border: f64,
 }
 
-/// A textured quad of the far field: a micro-texture placed in 3D.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// A textured quad of the far field: a micro-texture placed in 3D. Stored in the `quads.bin` blob
+/// as [`QUAD_RECORD_BYTES`]-byte records (see `docs/FORMAT.md`); the corners are not stored but
+/// recomputed from face, layer distance and texel rectangle on reading, so they are exact.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quad {
     pub face: Face,
     /// Layer index, far to near.
     pub layer: u16,
+    /// Texel rectangle `[x0, y0, x1, y1]` (half-open) of the face image the quad covers.
+    pub texels: [u16; 4],
     /// Corners in world space, in the order (s0,t0), (s1,t0), (s1,t1), (s0,t1) of the face image.
     pub corners: [[f32; 3]; 4],
     /// Index into [`CellHeader::macros`].
@@ -172,9 +176,15 @@ pub struct CellHeader {
     pub cell: ViewCell,
     pub params_hash: String,
     pub scene_fingerprint: String,
+    /// Texels per face side (`Res`).
+    pub resolution: u32,
     pub near_field: f64,
-    /// Per baked face (same order as `BakeParams::faces`), its layers far to near.
+    /// The baked faces, in lemi's order.
+    pub faces: Vec<Face>,
+    /// Per baked face (same order as `faces`), its layers far to near.
     pub layers: Vec<Vec<LayerInfo>>,
+    /// The impostor quads (stored in the `quads.bin` blob, not in the JSON header).
+    #[serde(skip)]
     pub quads: Vec<Quad>,
     pub macros: Vec<MacroInfo>,
     pub stats: CellStats,
@@ -260,10 +270,14 @@ pub struct CellFile {
 
 impl CellFile {
     pub fn encode(&self) -> Result<Vec<u8>, ContainerError> {
-        let mut blobs = Vec::with_capacity(1 + self.pngs.len());
+        let mut blobs = Vec::with_capacity(2 + self.pngs.len());
         blobs.push(Blob {
             name: "near.bin".into(),
             data: bytemuck::cast_slice(&self.near).to_vec(),
+        });
+        blobs.push(Blob {
+            name: "quads.bin".into(),
+            data: encode_quads(&self.header.quads)?,
         });
         for (m, png) in self.header.macros.iter().zip(&self.pngs) {
             blobs.push(Blob {
@@ -275,7 +289,7 @@ impl CellFile {
     }
 
     pub fn decode(bytes: &[u8]) -> Result<CellFile, ContainerError> {
-        let (header, blobs): (CellHeader, Vec<Blob>) =
+        let (mut header, blobs): (CellHeader, Vec<Blob>) =
             container::decode(CELL_MAGIC, "cell", BUNDLE_VERSION, bytes)?;
         let mut it = blobs.into_iter();
         let near_blob = it
@@ -292,6 +306,11 @@ impl CellFile {
                 ]
             })
             .collect();
+        let quads_blob = it
+            .next()
+            .filter(|b| b.name == "quads.bin")
+            .ok_or_else(|| ContainerError::Header("missing quads.bin".into()))?;
+        header.quads = decode_quads(&quads_blob.data, &header)?;
         let pngs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
         if pngs.len() != header.macros.len() {
             return Err(ContainerError::Header(format!(
@@ -300,13 +319,15 @@ impl CellFile {
                 pngs.len()
             )));
         }
-        for q in &header.quads {
-            let ok = (q.macro_index as usize) < header.macros.len()
-                && q.corners.iter().flatten().all(|c| c.is_finite());
-            if !ok {
-                return Err(ContainerError::Header(
-                    "a quad references a missing macro-texture or has non-finite corners".into(),
-                ));
+        for (i, q) in header.quads.iter().enumerate() {
+            let fits = header.macros.get(q.macro_index as usize).is_some_and(|m| {
+                let [x, y, w, h] = q.rect.map(u64::from);
+                x + w <= m.width as u64 && y + h <= m.height as u64
+            });
+            if !fits {
+                return Err(ContainerError::Header(format!(
+                    "quad {i} references a missing macro-texture or lies outside it"
+                )));
             }
         }
         Ok(CellFile { header, near, pngs })
@@ -356,6 +377,111 @@ impl CellFile {
     }
 }
 
+/// Bytes of one quad record in `quads.bin` (before deflate).
+pub const QUAD_RECORD_BYTES: usize = 20;
+
+/// `quads.bin`: the quads as little-endian records `face u8, rotated u8, layer u16,
+/// macro_index u32, texel x0 y0 x1 y1 u16 ×4, macro x y u16 ×2`, deflated (zlib). The macro
+/// footprint is the texel rectangle's size, swapped when rotated.
+fn encode_quads(quads: &[Quad]) -> Result<Vec<u8>, ContainerError> {
+    use std::io::Write;
+    let mut raw = Vec::with_capacity(quads.len() * QUAD_RECORD_BYTES);
+    for q in quads {
+        let to16 = |v: u32| {
+            u16::try_from(v).map_err(|_| {
+                ContainerError::Header(format!("macro-texture position {v} exceeds 65535"))
+            })
+        };
+        raw.push(q.face.index() as u8);
+        raw.push(q.rotated as u8);
+        raw.extend_from_slice(&q.layer.to_le_bytes());
+        raw.extend_from_slice(&q.macro_index.to_le_bytes());
+        for t in q.texels {
+            raw.extend_from_slice(&t.to_le_bytes());
+        }
+        raw.extend_from_slice(&to16(q.rect[0])?.to_le_bytes());
+        raw.extend_from_slice(&to16(q.rect[1])?.to_le_bytes());
+    }
+    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    enc.write_all(&raw)
+        .and_then(|_| enc.finish())
+        .map_err(|e| ContainerError::Header(format!("compressing quads.bin: {e}")))
+}
+
+/// Inverse of [`encode_quads`]; recomputes the corners from the header's layers.
+fn decode_quads(data: &[u8], header: &CellHeader) -> Result<Vec<Quad>, ContainerError> {
+    use std::io::Read;
+    let bad = |m: String| ContainerError::Header(format!("quads.bin: {m}"));
+    let mut raw = Vec::new();
+    flate2::read::ZlibDecoder::new(data)
+        .take(1 << 32)
+        .read_to_end(&mut raw)
+        .map_err(|e| bad(format!("not valid zlib data: {e}")))?;
+    if raw.len() % QUAD_RECORD_BYTES != 0 {
+        return Err(bad(format!(
+            "{} bytes is not a whole number of {QUAD_RECORD_BYTES}-byte records",
+            raw.len()
+        )));
+    }
+    if header.layers.len() != header.faces.len() {
+        return Err(bad(format!(
+            "{} faces but {} layer lists",
+            header.faces.len(),
+            header.layers.len()
+        )));
+    }
+    let res = header.resolution;
+    let u16_at = |r: &[u8], i: usize| u16::from_le_bytes([r[i], r[i + 1]]);
+    let center = header.cell.center;
+    raw.chunks_exact(QUAD_RECORD_BYTES)
+        .enumerate()
+        .map(|(i, r)| {
+            let face = Face::from_index(r[0] as usize)
+                .ok_or_else(|| bad(format!("quad {i}: face {} does not exist", r[0])))?;
+            let rotated = match r[1] {
+                0 => false,
+                1 => true,
+                v => return Err(bad(format!("quad {i}: rotation flag {v}"))),
+            };
+            let layer = u16_at(r, 2);
+            let macro_index = u32::from_le_bytes([r[4], r[5], r[6], r[7]]);
+            let texels = [u16_at(r, 8), u16_at(r, 10), u16_at(r, 12), u16_at(r, 14)];
+            let [x0, y0, x1, y1] = texels.map(u32::from);
+            if x0 >= x1 || y0 >= y1 || x1 > res || y1 > res {
+                return Err(bad(format!(
+                    "quad {i}: texel rectangle {texels:?} is empty or outside the {res}² face"
+                )));
+            }
+            let slot = header
+                .faces
+                .iter()
+                .position(|&f| f == face)
+                .ok_or_else(|| bad(format!("quad {i}: face {face} was not baked")))?;
+            let distance = header.layers[slot]
+                .get(layer as usize)
+                .map(|l| l.distance)
+                .ok_or_else(|| bad(format!("quad {i}: face {face} has no layer {layer}")))?;
+            let rect = crate::compress::TexelRect { x0, y0, x1, y1 };
+            let corners = crate::compress::quad_corners(face, distance, res, rect)
+                .map(|c| (center + c).as_vec3().to_array());
+            if corners.iter().flatten().any(|c| !c.is_finite()) {
+                return Err(bad(format!("quad {i}: non-finite corners")));
+            }
+            let (w, h) = (x1 - x0, y1 - y0);
+            let (fw, fh) = if rotated { (h, w) } else { (w, h) };
+            Ok(Quad {
+                face,
+                layer,
+                texels,
+                corners,
+                macro_index,
+                rect: [u16_at(r, 16) as u32, u16_at(r, 18) as u32, fw, fh],
+                rotated,
+            })
+        })
+        .collect()
+}
+
 /// Encodes an RGBA8 image as PNG (best compression: macro-textures are written once, read often).
 pub fn encode_png(rgba: &[u8], width: u32, height: u32) -> Result<Vec<u8>, ContainerError> {
     use image::ImageEncoder;
@@ -390,7 +516,9 @@ mod tests {
                 },
                 params_hash: "abc".into(),
                 scene_fingerprint: "def".into(),
+                resolution: 64,
                 near_field: 42.0,
+                faces: vec![Face::PosX],
                 layers: vec![vec![LayerInfo {
                     distance: 100.0,
                     near_border: 50.0,
@@ -399,7 +527,19 @@ mod tests {
                 quads: vec![Quad {
                     face: Face::PosX,
                     layer: 0,
-                    corners: [[1.0, 2.0, 3.0]; 4],
+                    texels: [8, 16, 16, 24],
+                    corners: crate::compress::quad_corners(
+                        Face::PosX,
+                        100.0,
+                        64,
+                        crate::compress::TexelRect {
+                            x0: 8,
+                            y0: 16,
+                            x1: 16,
+                            y1: 24,
+                        },
+                    )
+                    .map(|c| (DVec3::new(15.0, 1.7, 25.0) + c).as_vec3().to_array()),
                     macro_index: 0,
                     rect: [0, 0, 8, 8],
                     rotated: false,
@@ -420,8 +560,17 @@ mod tests {
     fn cell_files_round_trip_and_reject_damage() {
         let c = sample_cell();
         let bytes = c.encode().unwrap();
-        assert_eq!(CellFile::decode(&bytes).unwrap(), c);
+        let back = CellFile::decode(&bytes).unwrap();
+        assert_eq!(back, c);
+        // +X face, texel edges 8 and 16 of 64 → s = −0.75, −0.5; right is −Z, so z = 25 + 75
+        assert_eq!(back.header.quads[0].corners[0][0], 115.0);
+        assert_eq!(back.header.quads[0].corners[0][2], 100.0);
         assert!(CellFile::decode(&bytes[..bytes.len() / 2]).is_err());
+        let mut bad_quad = c.clone();
+        bad_quad.header.quads[0].layer = 3;
+        let bytes3 = bad_quad.encode().unwrap();
+        let err = CellFile::decode(&bytes3).unwrap_err().to_string();
+        assert!(err.contains("no layer 3"), "{err}");
         let mut bad = bytes.clone();
         let n = bad.len();
         bad[n / 3] ^= 1;
@@ -442,6 +591,7 @@ mod tests {
         let q = Quad {
             face: Face::PosX,
             layer: 0,
+            texels: [0, 0, 3, 5],
             corners: [[0.0; 3]; 4],
             macro_index: 0,
             rect: [10, 20, fw, fh],

@@ -830,6 +830,7 @@ mod tests {
         Quad {
             face: Face::NegZ,
             layer,
+            texels: [0, 0, 1, 1],
             corners: [[0.0; 3]; 4],
             macro_index,
             rect,

@@ -53,6 +53,7 @@ fn quad(
     Quad {
         face: Face::NegZ,
         layer,
+        texels: [0, 0, 1, 1],
         corners: [p(x0, y1), p(x1, y1), p(x1, y0), p(x0, y0)],
         macro_index,
         rect,
