@@ -121,8 +121,42 @@ struct CellSummary {
     status: &'static str,
     seconds: f64,
     bytes: u64,
-    #[serde(flatten)]
-    stats: CellStats,
+    raw_bytes: u64,
+    macro_bytes: u64,
+    png_bytes: u64,
+    far_triangles: u64,
+    near_triangles: u64,
+    submitted_triangles: u64,
+    opaque_texels_recorded: u64,
+    opaque_texels_after_hidden_removal: u64,
+    micro_textures: u64,
+    micro_fill_ratio: f64,
+    macro_textures: u64,
+    /// Seconds per stage.
+    stage_seconds: std::collections::BTreeMap<String, f64>,
+}
+
+impl CellSummary {
+    fn new(id: &str, status: &'static str, seconds: f64, bytes: u64, s: &CellStats) -> Self {
+        CellSummary {
+            id: id.to_string(),
+            status,
+            seconds,
+            bytes,
+            raw_bytes: s.raw_bytes,
+            macro_bytes: s.macro_bytes,
+            png_bytes: s.png_bytes,
+            far_triangles: s.far_triangles,
+            near_triangles: s.near_triangles,
+            submitted_triangles: s.submitted_triangles,
+            opaque_texels_recorded: s.opaque_texels_recorded,
+            opaque_texels_after_hidden_removal: s.opaque_texels_after_hidden_removal,
+            micro_textures: s.micro_textures,
+            micro_fill_ratio: s.micro_fill_ratio,
+            macro_textures: s.macro_textures,
+            stage_seconds: s.seconds.iter().cloned().collect(),
+        }
+    }
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -339,13 +373,13 @@ pub fn run(args: Args) -> Result<()> {
             } => {
                 baked += 1;
                 add(&mut total, &file.header.stats);
-                per_cell.push(CellSummary {
-                    id: entry.id.clone(),
-                    status: "baked",
-                    seconds: *seconds,
-                    bytes: entry.bytes,
-                    stats: file.header.stats.clone(),
-                });
+                per_cell.push(CellSummary::new(
+                    &entry.id,
+                    "baked",
+                    *seconds,
+                    entry.bytes,
+                    &file.header.stats,
+                ));
             }
             CellOutcome::Skipped { entry } => {
                 skipped += 1;
@@ -353,13 +387,13 @@ pub fn run(args: Args) -> Result<()> {
                     .map(|f| f.header.stats)
                     .unwrap_or_default();
                 add(&mut total, &stats);
-                per_cell.push(CellSummary {
-                    id: entry.id.clone(),
-                    status: "skipped (already baked)",
-                    seconds: 0.0,
-                    bytes: entry.bytes,
-                    stats,
-                });
+                per_cell.push(CellSummary::new(
+                    &entry.id,
+                    "skipped (already baked)",
+                    0.0,
+                    entry.bytes,
+                    &stats,
+                ));
             }
         }
     }
@@ -384,7 +418,7 @@ pub fn run(args: Args) -> Result<()> {
             "submitted_triangles": total.submitted_triangles,
             "micro_textures": total.micro_textures,
             "macro_textures": total.macro_textures,
-            "stage_seconds": total.seconds,
+            "stage_seconds": total.seconds.iter().cloned().collect::<std::collections::BTreeMap<String, f64>>(),
             "warnings": warnings,
             "per_cell": per_cell,
         });

@@ -232,7 +232,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         gpu_scene.geometry.chunks().len()
     );
     println!(
-        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {}°  {}x{}",
+        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {:.1}°  {}x{}",
         cam.eye.x,
         cam.eye.y,
         cam.eye.z,
@@ -374,7 +374,7 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         impostor_cell.texture_bytes() as f64 / 1e6
     );
     println!(
-        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {}°  {}x{}",
+        "camera     eye ({:.3}, {:.3}, {:.3})  dir ({:.3}, {:.3}, {:.3})  fov {:.1}°  {}x{}",
         cam.eye.x,
         cam.eye.y,
         cam.eye.z,

@@ -21,7 +21,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// The main job on the built-in default scene: placement, reference and cube-face renders.
+    /// The main job on the built-in default scene: bake a strip of cells, compare with the reference.
     Demo(cmd_demo::Args),
     /// Bake view cells into a bundle of layered impostors (resumable, shardable).
     Bake(cmd_bake::Args),

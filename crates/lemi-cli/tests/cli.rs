@@ -149,3 +149,157 @@ fn layers_reproduces_the_paper_and_rejects_bad_parameters() {
         "near",
     );
 }
+
+/// `lemi bake` → `lemi render BUNDLE --compare`, resume, shards + merge, all through the binary.
+#[test]
+fn bake_render_compare_resume_and_merge() {
+    let d = tmp("bake");
+    let bundle = d.join("bundle");
+    let b = bundle.to_str().unwrap();
+    let common = [
+        "builtin:city:20k:3",
+        "--region",
+        "15,1.7,-5,35,1.7,5",
+        "--cell-size",
+        "10",
+        "--resolution",
+        "64",
+        "--layers",
+        "6",
+        "--alpha-deg",
+        "0.5",
+    ];
+    let mut args = vec!["bake"];
+    args.extend(common);
+    args.extend(["-o", b, "--json"]);
+    let o = lemi(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["cells"], 2);
+    assert_eq!(v["baked"], 2);
+    for key in [
+        "seconds",
+        "raw_bytes",
+        "png_bytes",
+        "far_triangles",
+        "near_triangles",
+        "submitted_triangles",
+    ] {
+        assert!(v[key].is_number(), "{key} missing: {v}");
+        assert!(v["per_cell"][0][key].is_number(), "per-cell {key} missing");
+    }
+    let far = v["far_triangles"].as_u64().unwrap();
+    let sub = v["submitted_triangles"].as_u64().unwrap();
+    assert!(far > 0 && sub >= far && sub <= 7 * far, "{far} {sub}");
+    // resume: nothing to do
+    let o = lemi(&args);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["skipped"], 2, "{v}");
+
+    // render from inside the first cell, with the comparison
+    let png = d.join("cmp.png");
+    let o = lemi(&[
+        "render",
+        b,
+        "--eye",
+        "16,1.7,-4",
+        "--look",
+        "100,5,-4",
+        "--size",
+        "160x90",
+        "--compare",
+        "--json",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["cell"], "0_0_0");
+    assert!(v["quads"].as_u64().unwrap() > 0);
+    assert!(v["compare"]["reference_covered"].as_u64().unwrap() > 0);
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (480, 90));
+
+    // outside the baked region: a clear error
+    let o = lemi(&[
+        "render",
+        b,
+        "--eye",
+        "500,1.7,0",
+        "--look",
+        "600,1.7,0",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert_clean_error(&o, "outside the baked region");
+    // the wrong scene: a fingerprint mismatch
+    let o = lemi(&[
+        "render",
+        b,
+        "--scene",
+        "builtin:city:20k:4",
+        "--eye",
+        "16,1.7,-4",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert_clean_error(&o, "not the one");
+
+    // shards, then merge: the same manifest as the single run
+    let sharded = d.join("sharded");
+    let s = sharded.to_str().unwrap();
+    for k in ["0/2", "1/2"] {
+        let mut args = vec!["bake"];
+        args.extend(common);
+        args.extend(["-o", s, "--shard", k]);
+        let o = lemi(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let o = lemi(&["bake", "--merge", s]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let a: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(bundle.join("manifest.json")).unwrap()).unwrap();
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(sharded.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(a, m);
+
+    // a damaged cell file: a clear error naming it
+    let cell = bundle.join("cells/0_0_0.lemicell");
+    let mut bytes = std::fs::read(&cell).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x55;
+    std::fs::write(&cell, &bytes).unwrap();
+    let o = lemi(&[
+        "render",
+        b,
+        "--eye",
+        "16,1.7,-4",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert_clean_error(&o, "0_0_0.lemicell");
+}
+
+#[test]
+fn bake_rejects_absurd_flags_by_name() {
+    let d = tmp("bake-bad");
+    let out = d.join("b");
+    let o = out.to_str().unwrap();
+    let base = ["bake", "builtin:city:20k:3", "-o", o];
+    for (extra, needle) in [
+        (vec!["--cell-size", "-3"], "--cell-size"),
+        (vec!["--resolution", "3"], "--resolution"),
+        (vec!["--layers", "0"], "--layers"),
+        (vec!["--faces", "5"], "--faces"),
+        (vec!["--shard", "3/2"], "3/2"),
+        (vec!["--region", "1,2,3"], "six"),
+        (vec!["--cells", "99_0_0"], "99_0_0"),
+        (vec!["--near-field", "1"], "--near-field"),
+        (vec!["--alpha-deg", "nan"], "--alpha-deg"),
+    ] {
+        let mut args = base.to_vec();
+        args.extend(extra);
+        assert_clean_error(&lemi(&args), needle);
+    }
+    assert_clean_error(&lemi(&["bake", "--merge", o]), "shard");
+}

@@ -165,7 +165,10 @@ pub struct CellStats {
     pub macro_textures: u64,
     pub macro_bytes: u64,
     pub png_bytes: u64,
-    /// Seconds per stage, by name.
+    /// Seconds per stage, by name. Not stored in the cell file (a cell's bytes depend only on the
+    /// scene and the parameters, so shards and re-runs give identical bundles); reported by the
+    /// bake's summary.
+    #[serde(skip)]
     pub seconds: Vec<(String, f64)>,
 }
 
