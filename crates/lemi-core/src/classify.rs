@@ -198,7 +198,7 @@ pub fn classify(
         submitted: 0,
     };
     let nf = DVec3::splat(near_field);
-    let mut far = vec![false; CLUSTER_SIZE];
+    let mut far = [false; CLUSTER_SIZE];
     for cl in &tris.clusters {
         let (lo, hi) = (cl.min - center, cl.max - center);
         let refs = &tris.refs[cl.range.clone()];
