@@ -96,7 +96,8 @@ fn entry_for(id: &str, bytes: &[u8]) -> CellEntry {
 }
 
 /// Checks a cell file already on disk: returns its entry if it is intact and was baked from the same
-/// scene with the same parameters (then a resumed bake skips it).
+/// scene with the same parameters for the same cell (index, centre and extent: a region moved by a
+/// fraction of a cell keeps the ids but not the reference viewpoints), so a resumed bake skips it.
 fn existing(bundle: &Path, cell: &ViewCell, job: &BakeJob, hash: &str) -> Option<CellEntry> {
     let id = cell.id();
     let path = bundle.join(cell_file_name(&id));
@@ -104,7 +105,7 @@ fn existing(bundle: &Path, cell: &ViewCell, job: &BakeJob, hash: &str) -> Option
     let file = CellFile::decode(&bytes).ok()?;
     let same = file.header.params_hash == hash
         && file.header.scene_fingerprint == job.scene.fingerprint
-        && file.header.cell.index == cell.index;
+        && file.header.cell == *cell;
     same.then(|| entry_for(&id, &bytes))
 }
 
