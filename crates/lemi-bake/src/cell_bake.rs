@@ -165,68 +165,13 @@ impl<'a> Baker<'a> {
         seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
 
         let t_record = Instant::now();
-        let mut clip_s = 0.0;
-        let mut faces: Vec<FaceLayers> = Vec::with_capacity(params.faces.len());
-        let mut opaque_recorded = 0u64;
-        for (slot, (&face, placement)) in params.faces.iter().zip(&placements).enumerate() {
-            let n = placement.layers.len();
-            // clip every slab of this face on the CPU, in parallel
-            let t = Instant::now();
-            let prepared: Vec<Slab> = placement
-                .layers
-                .par_iter()
-                .enumerate()
-                .map(|(k, layer)| {
-                    self.prepare_slab(
-                        &class.bins[slot][k],
-                        center,
-                        face,
-                        layer.near_border,
-                        layer.far_border,
-                    )
-                })
-                .collect();
-            clip_s += t.elapsed().as_secs_f64();
-            let mut images = Vec::with_capacity(n);
-            for (k, (slab, layer)) in prepared.into_iter().zip(&placement.layers).enumerate() {
-                on_stage(&Stage::Record {
-                    face,
-                    layer: k,
-                    layers: n,
-                });
-                let near_plane = 0.5 * layer.near_border.min(near_field);
-                let frame = self
-                    .recorder
-                    .record(
-                        &self.materials,
-                        DVec3::ZERO,
-                        face,
-                        &slab.vertices,
-                        &slab.runs,
-                        near_plane,
-                        &self.lighting,
-                    )
-                    .map_err(|e| cell_err(format!("recording face {face} layer {k}: {e}")))?;
-                let mut border = vec![false; (res * res) as usize];
-                let planes: Vec<f64> = [layer.near_border, layer.far_border]
-                    .into_iter()
-                    .filter(|p| p.is_finite())
-                    .collect();
-                mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
-                let image = LayerImage::from_parts(res, frame.rgba, border)
-                    .map_err(|e| cell_err(format!("face {face} layer {k}: {e}")))?;
-                opaque_recorded += image.opaque_count();
-                images.push(image);
-            }
-            faces.push(FaceLayers {
-                face,
-                distances: placement.layers.iter().map(|l| l.distance).collect(),
-                layers: images,
-            });
-        }
+        let rec =
+            self.record_layers(cell, &placements, &class, near_field, false, &mut on_stage)?;
+        let mut faces = rec.faces;
+        let opaque_recorded = rec.opaque_recorded;
         let record_s = t_record.elapsed().as_secs_f64();
-        seconds.push(("clip".into(), clip_s));
-        seconds.push(("record".into(), record_s - clip_s));
+        seconds.push(("clip".into(), rec.clip_seconds));
+        seconds.push(("record".into(), record_s - rec.clip_seconds));
 
         on_stage(&Stage::Compress);
         let t = Instant::now();
@@ -330,6 +275,133 @@ impl<'a> Baker<'a> {
         })
     }
 
+    /// Records the layers of `cell` again and keeps only their per-texel depths along the face
+    /// axis (for measuring the geometric error of a baked cell, `lemi_core::parallax_error`). The
+    /// result is what the bake of the same cell recorded, before compression.
+    pub fn record_depths(
+        &self,
+        cell: &ViewCell,
+    ) -> Result<lemi_core::parallax_error::LayerDepths, BakeError> {
+        let placements = place_cell(&self.params, cell)?;
+        let near_field = placements
+            .iter()
+            .map(|p| p.near_field)
+            .fold(0.0f64, f64::max);
+        let borders: Vec<Vec<f64>> = placements
+            .iter()
+            .map(|p| p.layers.iter().map(|l| l.near_border).collect())
+            .collect();
+        let class = classify(
+            &self.tris,
+            cell.center,
+            near_field,
+            &self.params.faces,
+            &borders,
+        );
+        let rec = self.record_layers(cell, &placements, &class, near_field, true, &mut |_| {})?;
+        Ok(lemi_core::parallax_error::LayerDepths {
+            center: cell.center,
+            res: self.params.resolution,
+            faces: self.params.faces.clone(),
+            distances: placements
+                .iter()
+                .map(|p| p.layers.iter().map(|l| l.distance).collect())
+                .collect(),
+            depth: rec.depths,
+        })
+    }
+
+    /// Clips and records every (face, layer) of a cell: the layer images with clip-border flags
+    /// (or, with `depths_only`, only the per-texel depths).
+    fn record_layers(
+        &self,
+        cell: &ViewCell,
+        placements: &[Placement],
+        class: &lemi_core::classify::Classification,
+        near_field: f64,
+        depths_only: bool,
+        on_stage: &mut dyn FnMut(&Stage),
+    ) -> Result<Recorded, BakeError> {
+        let cell_err = |message: String| BakeError::Cell {
+            cell: cell.id(),
+            message,
+        };
+        let center = cell.center;
+        let res = self.params.resolution;
+        let mut out = Recorded {
+            faces: Vec::new(),
+            depths: Vec::new(),
+            opaque_recorded: 0,
+            clip_seconds: 0.0,
+        };
+        for (slot, (&face, placement)) in self.params.faces.iter().zip(placements).enumerate() {
+            let n = placement.layers.len();
+            // clip every slab of this face on the CPU, in parallel
+            let t = Instant::now();
+            let prepared: Vec<Slab> = placement
+                .layers
+                .par_iter()
+                .enumerate()
+                .map(|(k, layer)| {
+                    self.prepare_slab(
+                        &class.bins[slot][k],
+                        center,
+                        face,
+                        layer.near_border,
+                        layer.far_border,
+                    )
+                })
+                .collect();
+            out.clip_seconds += t.elapsed().as_secs_f64();
+            let mut images = Vec::with_capacity(n);
+            let mut depths = Vec::with_capacity(n);
+            for (k, (slab, layer)) in prepared.into_iter().zip(&placement.layers).enumerate() {
+                on_stage(&Stage::Record {
+                    face,
+                    layer: k,
+                    layers: n,
+                });
+                let near_plane = 0.5 * layer.near_border.min(near_field);
+                let frame = self
+                    .recorder
+                    .record(
+                        &self.materials,
+                        DVec3::ZERO,
+                        face,
+                        &slab.vertices,
+                        &slab.runs,
+                        near_plane,
+                        &self.lighting,
+                    )
+                    .map_err(|e| cell_err(format!("recording face {face} layer {k}: {e}")))?;
+                if depths_only {
+                    depths.push(frame.depth);
+                    continue;
+                }
+                let mut border = vec![false; (res * res) as usize];
+                let planes: Vec<f64> = [layer.near_border, layer.far_border]
+                    .into_iter()
+                    .filter(|p| p.is_finite())
+                    .collect();
+                mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
+                let image = LayerImage::from_parts(res, frame.rgba, border)
+                    .map_err(|e| cell_err(format!("face {face} layer {k}: {e}")))?;
+                out.opaque_recorded += image.opaque_count();
+                images.push(image);
+            }
+            if depths_only {
+                out.depths.push(depths);
+            } else {
+                out.faces.push(FaceLayers {
+                    face,
+                    distances: placement.layers.iter().map(|l| l.distance).collect(),
+                    layers: images,
+                });
+            }
+        }
+        Ok(out)
+    }
+
     /// Clips the triangles of one bin to the slab `[near, far]` of `face`, sorted by material, with
     /// positions relative to `center`.
     fn prepare_slab(&self, bin: &[TriRef], center: DVec3, face: Face, near: f64, far: f64) -> Slab {
@@ -368,6 +440,14 @@ impl<'a> Baker<'a> {
         }
         Slab { vertices, runs }
     }
+}
+
+/// What [`Baker::record_layers`] produced.
+struct Recorded {
+    faces: Vec<FaceLayers>,
+    depths: Vec<Vec<Vec<f32>>>,
+    opaque_recorded: u64,
+    clip_seconds: f64,
 }
 
 /// The clipped triangles of one slab and their material runs.

@@ -12,6 +12,7 @@ pub mod clip;
 pub mod compress;
 pub mod container;
 pub mod face;
+pub mod parallax_error;
 pub mod placement;
 pub mod scene;
 

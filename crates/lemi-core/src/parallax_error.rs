@@ -1,0 +1,267 @@
+//! The geometric error of an impostor image, per pixel, in output pixels: how far from where it is
+//! drawn the surface point an impostor pixel shows would really appear from this viewpoint.
+//!
+//! This work is based on: GI 2002 sec. 4 and TR-186-2-02-04 sec. 2.1, whose placement bounds the
+//! parallax angle between a point and its image on the layer, seen from anywhere in the view cell,
+//! by α (one output pixel). Here that bound is *measured*: an impostor pixel at `p` whose view
+//! depth is `z` lies at the 3D point `X` on a layer plane (face `f`, distance `D` from the reference
+//! viewpoint `c`); the layer's texel there was recorded from `c` with depth `d` along the face axis,
+//! so the true surface point is `T = c + (X − c)·d/D` (same ray from `c`). The error is the distance
+//! between `p` and the projection of `T` from this viewpoint. Pixels that are not impostor texels
+//! (near geometry, background), whose texel has no recorded depth, or whose true point is behind the
+//! eye get NaN.
+//!
+//! A texel filled by gap filling (GI 2002 sec. 5.1) has no depth of its own: it was copied from the
+//! next closer layer, so that layer's depth is used.
+
+use glam::{DVec2, DVec3, DVec4};
+
+use crate::camera::View;
+use crate::Face;
+
+/// Per-texel depths recorded at bake time: along the face axis, `f32::INFINITY` where the layer
+/// recorded nothing.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LayerDepths {
+    /// The reference viewpoint.
+    pub center: DVec3,
+    pub res: u32,
+    pub faces: Vec<Face>,
+    /// Per face (same order as `faces`), the layer distances far to near.
+    pub distances: Vec<Vec<f64>>,
+    /// Per face, per layer (far to near), `res · res` depths, row-major, row 0 at the top.
+    pub depth: Vec<Vec<Vec<f32>>>,
+}
+
+/// Which layer texel a world point on a layer plane belongs to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerTexel {
+    pub face_slot: usize,
+    pub layer: usize,
+    pub i: u32,
+    pub j: u32,
+    /// The point's depth along the face axis (≈ the layer distance).
+    pub depth: f64,
+}
+
+impl LayerDepths {
+    /// The layer texel that the world point `x` lies on (within a relative `tolerance` of a layer
+    /// plane and inside its face's image), if any.
+    pub fn texel_of(&self, x: DVec3, tolerance: f64) -> Option<LayerTexel> {
+        let rel = x - self.center;
+        let mut best: Option<(f64, LayerTexel)> = None;
+        for (slot, &face) in self.faces.iter().enumerate() {
+            let Some((s, t, d)) = face.project(rel) else {
+                continue;
+            };
+            let lim = 1.0 + 1e-6;
+            if s.abs() > lim || t.abs() > lim {
+                continue;
+            }
+            let dists = self.distances.get(slot)?;
+            // the layer whose plane is closest (distances are descending)
+            for (k, &dk) in dists.iter().enumerate() {
+                let off = (d - dk).abs() / dk;
+                if off <= tolerance && best.as_ref().is_none_or(|(b, _)| off < *b) {
+                    let r = self.res as f64;
+                    let i = (((s + 1.0) * 0.5 * r).floor() as i64).clamp(0, self.res as i64 - 1);
+                    let j = (((t + 1.0) * 0.5 * r).floor() as i64).clamp(0, self.res as i64 - 1);
+                    best = Some((
+                        off,
+                        LayerTexel {
+                            face_slot: slot,
+                            layer: k,
+                            i: i as u32,
+                            j: j as u32,
+                            depth: d,
+                        },
+                    ));
+                }
+            }
+        }
+        best.map(|(_, t)| t)
+    }
+
+    /// The recorded depth of a texel, or that of the next closer layers (gap-filled texels).
+    pub fn recorded_depth(&self, t: &LayerTexel) -> Option<f64> {
+        let layers = self.depth.get(t.face_slot)?;
+        let idx = t.j as usize * self.res as usize + t.i as usize;
+        layers
+            .get(t.layer..)?
+            .iter()
+            .take(2)
+            .filter_map(|l| l.get(idx))
+            .find(|d| d.is_finite())
+            .map(|&d| d as f64)
+    }
+}
+
+/// What [`pixel_errors`] measured.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParallaxErrors {
+    /// Per pixel, the error in pixels; NaN where not an impostor texel (see module docs).
+    pub error_px: Vec<f32>,
+    /// Pixels attributed to a layer texel.
+    pub impostor_pixels: u64,
+    /// Of those, pixels whose texel (and the next closer one) recorded no depth.
+    pub without_depth: u64,
+}
+
+/// The geometric error of every pixel of an impostor image with view depths `depth` rendered from
+/// `view` (see the module docs). `tolerance`: how close to a layer plane (relative to its distance)
+/// a pixel's point must be to count as that layer's; the impostor renderer's depth is f32, so
+/// about `1e-4` is right.
+pub fn pixel_errors(
+    view: &View,
+    depth: &[f32],
+    layers: &LayerDepths,
+    tolerance: f64,
+) -> ParallaxErrors {
+    let (w, h) = (view.width as usize, view.height as usize);
+    let mut out = ParallaxErrors {
+        error_px: vec![f32::NAN; w * h],
+        ..Default::default()
+    };
+    let inv_proj = view.proj.inverse();
+    let inv_view = view.view.inverse();
+    let vp = view.view_proj();
+    for (idx, &z) in depth.iter().enumerate().take(w * h) {
+        if !z.is_finite() || z <= 0.0 {
+            continue;
+        }
+        let pixel = DVec2::new((idx % w) as f64 + 0.5, (idx / w) as f64 + 0.5);
+        let ndc = view.pixel_to_ndc(pixel);
+        let a = inv_proj * DVec4::new(ndc.x, ndc.y, 1.0, 1.0);
+        let b = inv_proj * DVec4::new(ndc.x, ndc.y, 0.5, 1.0);
+        let (a, b) = (a.truncate() / a.w, b.truncate() / b.w);
+        let t = (-(z as f64) - a.z) / (b.z - a.z);
+        let x = inv_view.transform_point3(a + (b - a) * t);
+        let Some(texel) = layers.texel_of(x, tolerance) else {
+            continue;
+        };
+        out.impostor_pixels += 1;
+        let Some(d) = layers.recorded_depth(&texel) else {
+            out.without_depth += 1;
+            continue;
+        };
+        let truth = layers.center + (x - layers.center) * (d / texel.depth);
+        let c = vp * truth.extend(1.0);
+        if c.w <= 0.0 {
+            continue;
+        }
+        let q = view.ndc_to_pixel(DVec2::new(c.x / c.w, c.y / c.w));
+        out.error_px[idx] = (q - pixel).length() as f32;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+
+    /// One +Z layer at distance `big_d` recording a surface at depth `d` everywhere.
+    fn flat(res: u32, big_d: f64, d: f32) -> LayerDepths {
+        LayerDepths {
+            center: DVec3::ZERO,
+            res,
+            faces: vec![Face::PosZ],
+            distances: vec![vec![big_d]],
+            depth: vec![vec![vec![d; (res * res) as usize]]],
+        }
+    }
+
+    /// The impostor depth image of the plane z = `big_d` seen by a camera looking along +Z.
+    fn plane_depth(view: &View, big_d: f64) -> Vec<f32> {
+        vec![big_d as f32; (view.width * view.height) as usize]
+    }
+
+    #[test]
+    fn no_error_from_the_reference_viewpoint_or_for_a_point_on_the_layer() {
+        let cam = Camera::new(DVec3::ZERO, DVec3::Z, DVec3::Y, 60.0, 64, 48).unwrap();
+        let v = cam.view();
+        let e = pixel_errors(&v, &plane_depth(&v, 100.0), &flat(32, 100.0, 60.0), 1e-4);
+        assert_eq!(e.impostor_pixels, 64 * 48);
+        assert!(e.error_px.iter().all(|&x| x < 1e-3), "from the centre");
+        let cam = Camera::new(DVec3::new(2.0, 1.0, 0.0), DVec3::Z, DVec3::Y, 60.0, 64, 48).unwrap();
+        let v = cam.view();
+        let e = pixel_errors(&v, &plane_depth(&v, 100.0), &flat(32, 100.0, 100.0), 1e-4);
+        assert!(e.error_px.iter().all(|&x| x < 1e-3), "surface on the layer");
+    }
+
+    /// A viewpoint moved by `e` sideways sees a point at depth `d` drawn on a layer at `D` shifted
+    /// by `f · e · (1/d − 1/D)` pixels (`f` the focal length in pixels): the closed form.
+    #[test]
+    fn sideways_offset_matches_the_closed_form_one_pixel_shift() {
+        let (w, h, fov_y) = (200u32, 100u32, 40.0f64);
+        let f = 0.5 * h as f64 / (0.5 * fov_y.to_radians()).tan();
+        let (big_d, d) = (200.0, 50.0);
+        // choose e so the shift is exactly one pixel
+        let e = 1.0 / (f * (1.0 / d - 1.0 / big_d));
+        let cam = Camera::new(DVec3::new(e, 0.0, 0.0), DVec3::Z, DVec3::Y, fov_y, w, h).unwrap();
+        let v = cam.view();
+        let r = pixel_errors(
+            &v,
+            &plane_depth(&v, big_d),
+            &flat(64, big_d, d as f32),
+            1e-4,
+        );
+        let vals: Vec<f32> = r.error_px.iter().copied().filter(|x| !x.is_nan()).collect();
+        assert_eq!(vals.len(), (w * h) as usize);
+        for x in vals {
+            assert!((x - 1.0).abs() < 2e-3, "{x}");
+        }
+        // twice the offset: two pixels
+        let cam = Camera::new(
+            DVec3::new(2.0 * e, 0.0, 0.0),
+            DVec3::Z,
+            DVec3::Y,
+            fov_y,
+            w,
+            h,
+        )
+        .unwrap();
+        let v = cam.view();
+        let r = pixel_errors(
+            &v,
+            &plane_depth(&v, big_d),
+            &flat(64, big_d, d as f32),
+            1e-4,
+        );
+        assert!(r.error_px.iter().all(|&x| (x - 2.0).abs() < 4e-3));
+    }
+
+    #[test]
+    fn background_near_geometry_and_missing_depth_are_not_measured() {
+        let cam = Camera::new(DVec3::ZERO, DVec3::Z, DVec3::Y, 60.0, 8, 8).unwrap();
+        let v = cam.view();
+        let mut z = plane_depth(&v, 100.0);
+        z[0] = f32::INFINITY; // background
+        z[1] = 30.0; // near geometry, on no layer plane
+        let mut layers = flat(4, 100.0, 60.0);
+        // texel (0, 0) of the layer recorded nothing: pixel (7, 7) of this view lies in texel (3, 3)
+        layers.depth[0][0][3 * 4 + 3] = f32::INFINITY;
+        let r = pixel_errors(&v, &z, &layers, 1e-4);
+        assert!(r.error_px[0].is_nan() && r.error_px[1].is_nan());
+        assert_eq!(r.impostor_pixels, 62);
+        assert!(r.without_depth > 0);
+    }
+
+    #[test]
+    fn gap_filled_texels_use_the_closer_layer() {
+        let mut l = flat(4, 100.0, 60.0);
+        l.distances[0] = vec![100.0, 50.0];
+        l.depth[0].push(vec![40.0; 16]);
+        l.depth[0][0][5] = f32::INFINITY;
+        let t = LayerTexel {
+            face_slot: 0,
+            layer: 0,
+            i: 1,
+            j: 1,
+            depth: 100.0,
+        };
+        assert_eq!(l.recorded_depth(&t), Some(40.0));
+        let t = LayerTexel { i: 2, ..t };
+        assert_eq!(l.recorded_depth(&t), Some(60.0));
+    }
+}
