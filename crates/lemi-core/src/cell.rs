@@ -40,6 +40,72 @@ impl ViewCell {
     }
 }
 
+/// Viewpoints at which a cell's impostors are evaluated: the centre, the 8 corners, the 6 face
+/// midpoints, the 12 edge midpoints and `random` interior points (deterministic from `seed`), each
+/// with a label. Corners and borders are where the parallax error is largest (TR sec. 2.1).
+pub fn eval_viewpoints(cell: &ViewCell, random: usize, seed: u64) -> Vec<(String, DVec3)> {
+    let mut out = vec![("centre".to_string(), cell.center)];
+    for (k, c) in cell.corners().iter().enumerate() {
+        out.push((format!("corner {k}"), *c));
+    }
+    let h = cell.half;
+    let axes = [DVec3::X, DVec3::Y, DVec3::Z];
+    for (a, axis) in axes.iter().enumerate() {
+        for sign in [-1.0, 1.0] {
+            out.push((
+                format!(
+                    "face {}{}",
+                    if sign < 0.0 { "-" } else { "+" },
+                    ["x", "y", "z"][a]
+                ),
+                cell.center + *axis * h * sign,
+            ));
+        }
+    }
+    for (a, axis) in axes.iter().enumerate() {
+        // edges parallel to `axis`: the other two coordinates at ±half
+        let (u, v) = (axes[(a + 1) % 3], axes[(a + 2) % 3]);
+        for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            out.push((
+                format!("edge {}{su:+}{sv:+}", ["x", "y", "z"][a]),
+                cell.center + u * h * su + v * h * sv,
+            ));
+        }
+    }
+    let mut x = seed ^ 0x9e37_79b9_7f4a_7c15;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    for k in 0..random {
+        let r = DVec3::new(next(), next(), next());
+        out.push((format!("random {k}"), cell.center + h * r));
+    }
+    out
+}
+
+/// View directions that cover every baked face: each face's axis and, between two baked faces at
+/// right angles, the diagonal (where two faces' impostors meet on screen).
+pub fn eval_directions(faces: &[crate::Face]) -> Vec<(String, DVec3)> {
+    let mut out: Vec<(String, DVec3)> = faces
+        .iter()
+        .map(|f| (f.name().to_string(), f.forward()))
+        .collect();
+    for (i, a) in faces.iter().enumerate() {
+        for b in &faces[i + 1..] {
+            if a.forward().dot(b.forward()).abs() < 0.5 {
+                out.push((
+                    format!("{}{}", a.name(), b.name()),
+                    (a.forward() + b.forward()).normalize(),
+                ));
+            }
+        }
+    }
+    out
+}
+
 /// Errors of cell-grid construction; each names the parameter at fault.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CellError {
@@ -216,6 +282,31 @@ mod tests {
         assert!(Shard::parse("1/0").is_err());
         assert!(Shard::parse("x").is_err());
         assert_eq!(Shard::parse("1/4").unwrap(), Shard { k: 1, n: 4 });
+    }
+
+    #[test]
+    fn eval_viewpoints_and_directions() {
+        let c = ViewCell {
+            index: IVec3::ZERO,
+            center: DVec3::new(5.0, 1.7, 5.0),
+            half: DVec3::splat(5.0),
+        };
+        let v = eval_viewpoints(&c, 4, 1);
+        assert_eq!(v.len(), 1 + 8 + 6 + 12 + 4);
+        let b = c.bounds();
+        for (label, p) in &v {
+            let inside = p.cmpge(b.min - 1e-9).all() && p.cmple(b.max + 1e-9).all();
+            assert!(inside, "{label} {p}");
+        }
+        // edge midpoints lie on exactly two cell planes
+        for (_, p) in v.iter().filter(|(l, _)| l.starts_with("edge")) {
+            let on = (*p - c.center).abs().cmpeq(DVec3::splat(5.0));
+            assert_eq!(on.bitmask().count_ones(), 2);
+        }
+        let d = eval_directions(&crate::Face::HORIZONTAL);
+        assert_eq!(d.len(), 4 + 4, "4 axes and 4 horizontal diagonals");
+        let d = eval_directions(&crate::Face::ALL);
+        assert_eq!(d.len(), 6 + 12);
     }
 
     #[test]
