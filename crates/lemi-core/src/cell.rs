@@ -62,7 +62,7 @@ pub fn eval_viewpoints(cell: &ViewCell, random: usize, seed: u64) -> Vec<(String
             ));
         }
     }
-    for (a, axis) in axes.iter().enumerate() {
+    for a in 0..3 {
         // edges parallel to `axis`: the other two coordinates at ±half
         let (u, v) = (axes[(a + 1) % 3], axes[(a + 2) % 3]);
         for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
