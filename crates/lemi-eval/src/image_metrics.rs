@@ -1,0 +1,438 @@
+//! Image metrics on a pair of frames (reference = all geometry, test = the impostor image):
+//!
+//! - [`flip`]: NVIDIA's ꟻLIP perceptual difference (Andersson et al., "FLIP: A Difference Evaluator
+//!   for Alternating Images", HPG 2020), computed by the reference C++ implementation through the
+//!   `nv-flip` bindings, with the magma colour map of the paper for the heat map;
+//! - [`psnr`]: peak signal-to-noise ratio over the R, G, B channels of the sRGB-encoded 8-bit values
+//!   (peak 255), `10·log10(255² / MSE)`;
+//! - [`ssim`]: the structural similarity index of Wang, Bovik, Sheikh & Simoncelli, "Image Quality
+//!   Assessment: From Error Visibility to Structural Similarity", IEEE TIP 2004, as in their reference
+//!   `ssim_index.m`: luma `Y = 0.299 R + 0.587 G + 0.114 B` of the 8-bit values, an 11×11 Gaussian
+//!   window with σ = 1.5, `K1 = 0.01`, `K2 = 0.03`, `L = 255`, the SSIM map over the "valid" window
+//!   positions (no padding) and its mean (MSSIM). No down-sampling is applied;
+//! - [`coverage`] and [`crack_pixels`]: from the depth images (finite depth = geometry drawn).
+//!
+//! All colour metrics ignore alpha: the RGB of a background pixel is the clear colour, which is what
+//! a viewer sees. Every function checks that both frames have the same size and consistent buffers and
+//! returns [`EvalError`] otherwise; nothing here panics on bad input.
+
+use lemi_gpu::Frame;
+
+use crate::EvalError;
+
+/// How many crack pixel positions [`CrackStats::first`] keeps.
+pub const MAX_CRACK_SAMPLES: usize = 16;
+
+/// The result of [`flip`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlipResult {
+    /// Mean of the per-pixel FLIP error (0 = identical, 1 = maximal), the single number the FLIP
+    /// authors recommend reporting.
+    pub mean: f32,
+    /// The per-pixel FLIP error in `[0, 1]`, rows top to bottom.
+    pub error: Vec<f32>,
+    /// The error mapped through the magma colour map, RGBA8 (alpha 255), same size as the inputs.
+    pub heatmap_rgba: Vec<u8>,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Pixel coverage of the two frames (finite depth = covered).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coverage {
+    pub reference_covered: u64,
+    pub test_covered: u64,
+    /// Pixels covered in both.
+    pub both: u64,
+    /// `both / reference_covered`: the share of the reference's geometry pixels the test covers too;
+    /// 1.0 when the reference covers none.
+    pub share: f64,
+}
+
+/// The result of [`crack_pixels`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CrackStats {
+    pub count: u64,
+    /// The first (up to [`MAX_CRACK_SAMPLES`]) crack pixels `(x, y)` in row-major order.
+    pub first: Vec<(u32, u32)>,
+    /// One flag per pixel, row-major: `true` where a crack is.
+    pub mask: Vec<bool>,
+}
+
+/// nv-flip's default pixels per degree of visual angle (67: a 0.7 m wide 4K monitor at 0.7 m).
+pub fn ppd_default() -> f32 {
+    nv_flip::DEFAULT_PIXELS_PER_DEGREE
+}
+
+/// Pixels per degree for an observer `distance_m` metres from a monitor `monitor_width_m` metres wide
+/// showing `resolution_x` pixels across (FLIP's own formula).
+pub fn ppd_for_monitor(distance_m: f32, resolution_x: f32, monitor_width_m: f32) -> f32 {
+    nv_flip::pixels_per_degree(distance_m, resolution_x, monitor_width_m)
+}
+
+/// Pixels per degree when the image is seen under the field of view it was rendered with: an
+/// image `width_px` wide with horizontal field of view `hfov_deg` (the observer at the projection
+/// centre). Uses the mean over the image, `width / fov`.
+pub fn ppd_for_view(width_px: u32, hfov_deg: f32) -> f32 {
+    if hfov_deg > 0.0 {
+        width_px as f32 / hfov_deg
+    } else {
+        ppd_default()
+    }
+}
+
+/// Checks that a frame's buffers match its size; returns the pixel count.
+pub(crate) fn check_frame(frame: &Frame, what: &'static str) -> Result<usize, EvalError> {
+    let n = frame.width as usize * frame.height as usize;
+    if frame.rgba.len() != 4 * n {
+        return Err(EvalError::BufferLength {
+            what,
+            width: frame.width,
+            height: frame.height,
+            expected: 4 * n,
+            actual: frame.rgba.len(),
+            unit: "RGBA bytes",
+        });
+    }
+    if frame.depth.len() != n {
+        return Err(EvalError::BufferLength {
+            what,
+            width: frame.width,
+            height: frame.height,
+            expected: n,
+            actual: frame.depth.len(),
+            unit: "depth values",
+        });
+    }
+    Ok(n)
+}
+
+/// Checks that both frames are well formed and of one size; returns the pixel count.
+pub(crate) fn check_pair(reference: &Frame, test: &Frame) -> Result<usize, EvalError> {
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return Err(EvalError::SizeMismatch {
+            what_a: "reference",
+            a_width: reference.width,
+            a_height: reference.height,
+            what_b: "test",
+            b_width: test.width,
+            b_height: test.height,
+        });
+    }
+    check_frame(reference, "reference frame")?;
+    check_frame(test, "test frame")
+}
+
+fn rgb_of(frame: &Frame) -> Vec<u8> {
+    frame
+        .rgba
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}
+
+/// FLIP between `reference` and `test` at `ppd` pixels per degree ([`ppd_default`] if unsure).
+/// An empty (0-pixel) pair gives mean 0 and empty maps.
+pub fn flip(reference: &Frame, test: &Frame, ppd: f32) -> Result<FlipResult, EvalError> {
+    let n = check_pair(reference, test)?;
+    let (width, height) = (reference.width, reference.height);
+    if n == 0 {
+        return Ok(FlipResult {
+            mean: 0.0,
+            error: Vec::new(),
+            heatmap_rgba: Vec::new(),
+            width,
+            height,
+        });
+    }
+    let ppd = if ppd.is_finite() && ppd > 0.0 {
+        ppd
+    } else {
+        ppd_default()
+    };
+    let ref_image = nv_flip::FlipImageRgb8::with_data(width, height, &rgb_of(reference));
+    let test_image = nv_flip::FlipImageRgb8::with_data(width, height, &rgb_of(test));
+    let error_map = nv_flip::flip(ref_image, test_image, ppd);
+    let error = error_map.to_vec();
+    let heat_rgb = error_map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
+    let heatmap_rgba = heat_rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    let sum: f64 = error.iter().map(|&e| e as f64).sum();
+    Ok(FlipResult {
+        mean: (sum / n as f64) as f32,
+        error,
+        heatmap_rgba,
+        width,
+        height,
+    })
+}
+
+/// Mean squared error over R, G, B (8-bit values); 0 for an empty pair.
+pub fn mse_rgb(reference: &Frame, test: &Frame) -> Result<f64, EvalError> {
+    let n = check_pair(reference, test)?;
+    if n == 0 {
+        return Ok(0.0);
+    }
+    let sum: u64 = reference
+        .rgba
+        .chunks_exact(4)
+        .zip(test.rgba.chunks_exact(4))
+        .map(|(a, b)| {
+            (0..3)
+                .map(|c| {
+                    let d = a[c] as i64 - b[c] as i64;
+                    (d * d) as u64
+                })
+                .sum::<u64>()
+        })
+        .sum();
+    Ok(sum as f64 / (3 * n) as f64)
+}
+
+/// PSNR in dB from an RGB mean squared error (peak 255); `INFINITY` for `mse == 0`.
+pub fn psnr_from_mse(mse: f64) -> f64 {
+    if mse <= 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}
+
+/// RGB mean squared error from a PSNR in dB (the inverse of [`psnr_from_mse`]); 0 for `INFINITY`.
+pub fn mse_from_psnr(psnr: f64) -> f64 {
+    if psnr.is_infinite() && psnr > 0.0 {
+        0.0
+    } else {
+        255.0f64 * 255.0 / 10f64.powf(psnr / 10.0)
+    }
+}
+
+/// PSNR in dB over R, G, B; `f64::INFINITY` for identical images (and for an empty pair).
+pub fn psnr(reference: &Frame, test: &Frame) -> Result<f64, EvalError> {
+    Ok(psnr_from_mse(mse_rgb(reference, test)?))
+}
+
+fn luma(frame: &Frame) -> Vec<f64> {
+    frame
+        .rgba
+        .chunks_exact(4)
+        .map(|p| 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64)
+        .collect()
+}
+
+/// Normalised 1D Gaussian of `size` taps, σ = `sigma` (the 2D window is its outer product, which
+/// equals MATLAB's `fspecial('gaussian', size, sigma)`).
+fn gaussian(size: usize, sigma: f64) -> Vec<f64> {
+    let c = (size as f64 - 1.0) / 2.0;
+    let w: Vec<f64> = (0..size)
+        .map(|i| {
+            let x = i as f64 - c;
+            (-x * x / (2.0 * sigma * sigma)).exp()
+        })
+        .collect();
+    let s: f64 = w.iter().sum();
+    w.into_iter().map(|v| v / s).collect()
+}
+
+/// "Valid" separable filtering of a `w × h` image with a `kx × ky` kernel (outer product).
+fn filter_valid(img: &[f64], w: usize, h: usize, kx: &[f64], ky: &[f64]) -> Vec<f64> {
+    let ow = w + 1 - kx.len();
+    let oh = h + 1 - ky.len();
+    let mut horiz = vec![0.0; ow * h];
+    for y in 0..h {
+        let row = &img[y * w..(y + 1) * w];
+        for x in 0..ow {
+            horiz[y * ow + x] = kx.iter().zip(&row[x..]).map(|(k, v)| k * v).sum();
+        }
+    }
+    let mut out = vec![0.0; ow * oh];
+    for (j, k) in ky.iter().enumerate() {
+        for y in 0..oh {
+            let src = &horiz[(y + j) * ow..(y + j + 1) * ow];
+            let dst = &mut out[y * ow..(y + 1) * ow];
+            for (d, s) in dst.iter_mut().zip(src) {
+                *d += k * s;
+            }
+        }
+    }
+    out
+}
+
+/// Mean SSIM (Wang et al. 2004, see the module doc) of the luma of the two frames, in `[-1, 1]`;
+/// 1 for identical images. Images smaller than 11 pixels in a dimension use a window truncated to
+/// that dimension (Gaussian renormalised); an empty pair gives 1.
+pub fn ssim(reference: &Frame, test: &Frame) -> Result<f64, EvalError> {
+    let n = check_pair(reference, test)?;
+    if n == 0 {
+        return Ok(1.0);
+    }
+    const WINDOW: usize = 11;
+    const SIGMA: f64 = 1.5;
+    const L: f64 = 255.0;
+    const C1: f64 = (0.01 * L) * (0.01 * L);
+    const C2: f64 = (0.03 * L) * (0.03 * L);
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let kx = gaussian(WINDOW.min(w), SIGMA);
+    let ky = gaussian(WINDOW.min(h), SIGMA);
+    let x = luma(reference);
+    let y = luma(test);
+    let xx: Vec<f64> = x.iter().map(|v| v * v).collect();
+    let yy: Vec<f64> = y.iter().map(|v| v * v).collect();
+    let xy: Vec<f64> = x.iter().zip(&y).map(|(a, b)| a * b).collect();
+    let mu_x = filter_valid(&x, w, h, &kx, &ky);
+    let mu_y = filter_valid(&y, w, h, &kx, &ky);
+    let e_xx = filter_valid(&xx, w, h, &kx, &ky);
+    let e_yy = filter_valid(&yy, w, h, &kx, &ky);
+    let e_xy = filter_valid(&xy, w, h, &kx, &ky);
+    let mut sum = 0.0;
+    for i in 0..mu_x.len() {
+        let (mx, my) = (mu_x[i], mu_y[i]);
+        let sxx = e_xx[i] - mx * mx;
+        let syy = e_yy[i] - my * my;
+        let sxy = e_xy[i] - mx * my;
+        sum += ((2.0 * mx * my + C1) * (2.0 * sxy + C2))
+            / ((mx * mx + my * my + C1) * (sxx + syy + C2));
+    }
+    Ok(sum / mu_x.len() as f64)
+}
+
+/// Coverage of the two frames by geometry (finite depth).
+pub fn coverage(reference: &Frame, test: &Frame) -> Result<Coverage, EvalError> {
+    check_pair(reference, test)?;
+    let (mut reference_covered, mut test_covered, mut both) = (0u64, 0u64, 0u64);
+    for (r, t) in reference.depth.iter().zip(&test.depth) {
+        let (r, t) = (r.is_finite(), t.is_finite());
+        reference_covered += r as u64;
+        test_covered += t as u64;
+        both += (r && t) as u64;
+    }
+    let share = if reference_covered == 0 {
+        1.0
+    } else {
+        both as f64 / reference_covered as f64
+    };
+    Ok(Coverage {
+        reference_covered,
+        test_covered,
+        both,
+        share,
+    })
+}
+
+/// Crack pixels: where the reference has geometry (finite depth) and the test shows background
+/// (non-finite depth), or the test's depth exceeds the reference's by more than
+/// `far_tolerance(pixel_index, reference_depth)` — the caller passes one layer's depth range there,
+/// so a test surface "one layer too far" counts as seen through a crack. A test depth *nearer* than
+/// the reference is never a crack. `pixel_index` is row-major `y * width + x`.
+pub fn crack_pixels(
+    reference: &Frame,
+    test: &Frame,
+    far_tolerance: &dyn Fn(usize, f32) -> f32,
+) -> Result<CrackStats, EvalError> {
+    check_pair(reference, test)?;
+    let width = reference.width.max(1) as usize;
+    let mut mask = vec![false; reference.depth.len()];
+    let mut first = Vec::new();
+    let mut count = 0u64;
+    for (i, (&r, &t)) in reference.depth.iter().zip(&test.depth).enumerate() {
+        if !r.is_finite() {
+            continue;
+        }
+        // A NaN tolerance or difference counts as a crack too (not provably within tolerance).
+        let within = (t - r)
+            .partial_cmp(&far_tolerance(i, r))
+            .is_some_and(|o| o.is_le());
+        let crack = !t.is_finite() || !within;
+        if crack {
+            mask[i] = true;
+            count += 1;
+            if first.len() < MAX_CRACK_SAMPLES {
+                first.push(((i % width) as u32, (i / width) as u32));
+            }
+        }
+    }
+    Ok(CrackStats { count, first, mask })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(w: u32, h: u32, rgb: [u8; 3], depth: f32) -> Frame {
+        let n = (w * h) as usize;
+        Frame {
+            width: w,
+            height: h,
+            rgba: (0..n).flat_map(|_| [rgb[0], rgb[1], rgb[2], 255]).collect(),
+            depth: vec![depth; n],
+        }
+    }
+
+    #[test]
+    fn gaussian_is_normalised_and_symmetric() {
+        let g = gaussian(11, 1.5);
+        assert!((g.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        for i in 0..11 {
+            assert!((g[i] - g[10 - i]).abs() < 1e-15);
+        }
+        assert!(g[5] > g[4]);
+    }
+
+    #[test]
+    fn filter_valid_of_constant_is_constant() {
+        let img = vec![3.0; 20 * 15];
+        let k = gaussian(11, 1.5);
+        let out = filter_valid(&img, 20, 15, &k, &k);
+        assert_eq!(out.len(), 10 * 5);
+        assert!(out.iter().all(|v| (v - 3.0).abs() < 1e-12));
+    }
+
+    #[test]
+    fn ssim_of_constant_offset_matches_luminance_term() {
+        // Flat images: σ = 0, so SSIM = (2 μx μy + C1) / (μx² + μy² + C1).
+        let a = frame(16, 16, [100, 100, 100], 1.0);
+        let b = frame(16, 16, [120, 120, 120], 1.0);
+        let c1 = (0.01f64 * 255.0).powi(2);
+        let (mx, my) = (100.0f64, 120.0f64);
+        let expected = (2.0 * mx * my + c1) / (mx * mx + my * my + c1);
+        let s = ssim(&a, &b).unwrap();
+        assert!((s - expected).abs() < 1e-9, "{s} vs {expected}");
+    }
+
+    #[test]
+    fn tiny_images_do_not_panic() {
+        let a = frame(1, 1, [0, 0, 0], 1.0);
+        let b = frame(1, 1, [255, 255, 255], f32::INFINITY);
+        assert!(ssim(&a, &b).unwrap() < 0.1);
+        assert!(psnr(&a, &b).unwrap().abs() < 1e-12);
+        assert!(flip(&a, &b, ppd_default()).unwrap().mean > 0.0);
+        let e = frame(0, 0, [0, 0, 0], 1.0);
+        assert_eq!(ssim(&e, &e).unwrap(), 1.0);
+        assert_eq!(flip(&e, &e, 67.0).unwrap().mean, 0.0);
+        assert_eq!(coverage(&e, &e).unwrap().share, 1.0);
+    }
+
+    #[test]
+    fn malformed_buffers_are_errors() {
+        let mut a = frame(4, 4, [0, 0, 0], 1.0);
+        let b = a.clone();
+        a.depth.pop();
+        assert!(matches!(
+            coverage(&a, &b),
+            Err(EvalError::BufferLength { .. })
+        ));
+        a.depth.push(1.0);
+        a.rgba.pop();
+        assert!(matches!(psnr(&a, &b), Err(EvalError::BufferLength { .. })));
+    }
+
+    #[test]
+    fn psnr_mse_round_trip() {
+        for mse in [0.5, 1.0, 100.0, 65025.0] {
+            assert!((mse_from_psnr(psnr_from_mse(mse)) - mse).abs() < 1e-9 * mse);
+        }
+        assert_eq!(mse_from_psnr(f64::INFINITY), 0.0);
+    }
+}
