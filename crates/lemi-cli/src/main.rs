@@ -4,6 +4,7 @@
 mod bundle_view;
 mod cmd_bake;
 mod cmd_demo;
+mod cmd_eval;
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
@@ -25,6 +26,8 @@ enum Command {
     Demo(cmd_demo::Args),
     /// Bake view cells into a bundle of layered impostors (resumable, shardable).
     Bake(cmd_bake::Args),
+    /// Measure a bundle's impostors against the geometry: the error certificate and report.
+    Eval(cmd_eval::Args),
     /// Print triangle/material counts, bounds and import statistics of a scene.
     Info(cmd_info::Args),
     /// Render a scene with the reference renderer, or a bundle's impostor view (`--compare`: side by side).
@@ -39,6 +42,7 @@ fn main() {
         Command::Demo(a) => cmd_demo::run(a),
         Command::Info(a) => cmd_info::run(a),
         Command::Bake(a) => cmd_bake::run(a),
+        Command::Eval(a) => cmd_eval::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),
     };

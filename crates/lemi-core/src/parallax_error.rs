@@ -3,16 +3,22 @@
 //!
 //! This work is based on: GI 2002 sec. 4 and TR-186-2-02-04 sec. 2.1, whose placement bounds the
 //! parallax angle between a point and its image on the layer, seen from anywhere in the view cell,
-//! by α (one output pixel). Here that bound is *measured*: an impostor pixel at `p` whose view
-//! depth is `z` lies at the 3D point `X` on a layer plane (face `f`, distance `D` from the reference
-//! viewpoint `c`); the layer's texel there was recorded from `c` with depth `d` along the face axis,
-//! so the true surface point is `T = c + (X − c)·d/D` (same ray from `c`). The error is the distance
-//! between `p` and the projection of `T` from this viewpoint. Pixels that are not impostor texels
-//! (near geometry, background), whose texel has no recorded depth, or whose true point is behind the
-//! eye get NaN.
+//! by α (one output pixel). Here that bound is *measured*: an impostor pixel whose view depth is
+//! `z` lies at a 3D point on a layer plane (face `f`, distance `D` from the reference viewpoint
+//! `c`), inside texel `(i, j)`. That texel was recorded from `c` along the ray through its centre
+//! `(s, t)`, with depth `d` along the face axis: the true surface point is
+//! `T = c + d·(forward + s·right + t·down)`, and the impostor draws it at
+//! `L = c + D·(forward + s·right + t·down)`. The error is the distance in output pixels between the
+//! projections of `T` and `L` from this viewpoint: the parallax of the texel, independent of how
+//! much the texel is magnified on screen (that is a resolution question, not a placement one).
+//! Pixels that are not impostor texels (near geometry, background), whose texel has no recorded
+//! depth, or whose true point is behind the eye get NaN.
 //!
 //! A texel filled by gap filling (GI 2002 sec. 5.1) has no depth of its own: it was copied from the
-//! next closer layer, so that layer's depth is used.
+//! next closer layer, so that layer's depth is used, and the pixel is flagged. Such a texel shows a
+//! point of the closer slab drawn one layer too far (that is what closes the gap), so its error is
+//! bounded by the parallax of two slabs, not one: the certificate reports it apart from the
+//! placement error of the layers' own texels.
 
 use glam::{DVec2, DVec3, DVec4};
 
@@ -82,17 +88,19 @@ impl LayerDepths {
         best.map(|(_, t)| t)
     }
 
-    /// The recorded depth of a texel, or that of the next closer layers (gap-filled texels).
-    pub fn recorded_depth(&self, t: &LayerTexel) -> Option<f64> {
+    /// The recorded depth of a texel, or that of the next closer layer (a gap-filled texel), and
+    /// whether it came from the closer layer.
+    pub fn recorded_depth(&self, t: &LayerTexel) -> Option<(f64, bool)> {
         let layers = self.depth.get(t.face_slot)?;
         let idx = t.j as usize * self.res as usize + t.i as usize;
         layers
             .get(t.layer..)?
             .iter()
             .take(2)
-            .filter_map(|l| l.get(idx))
-            .find(|d| d.is_finite())
-            .map(|&d| d as f64)
+            .enumerate()
+            .filter_map(|(k, l)| l.get(idx).map(|d| (k, d)))
+            .find(|(_, d)| d.is_finite())
+            .map(|(k, &d)| (d as f64, k > 0))
     }
 }
 
@@ -101,6 +109,8 @@ impl LayerDepths {
 pub struct ParallaxErrors {
     /// Per pixel, the error in pixels; NaN where not an impostor texel (see module docs).
     pub error_px: Vec<f32>,
+    /// Per pixel, whether it shows a gap-filled texel (its true point is the closer layer's).
+    pub gap_filled: Vec<bool>,
     /// Pixels attributed to a layer texel.
     pub impostor_pixels: u64,
     /// Of those, pixels whose texel (and the next closer one) recorded no depth.
@@ -120,6 +130,7 @@ pub fn pixel_errors(
     let (w, h) = (view.width as usize, view.height as usize);
     let mut out = ParallaxErrors {
         error_px: vec![f32::NAN; w * h],
+        gap_filled: vec![false; w * h],
         ..Default::default()
     };
     let inv_proj = view.proj.inverse();
@@ -140,17 +151,25 @@ pub fn pixel_errors(
             continue;
         };
         out.impostor_pixels += 1;
-        let Some(d) = layers.recorded_depth(&texel) else {
+        let Some((d, from_closer)) = layers.recorded_depth(&texel) else {
             out.without_depth += 1;
             continue;
         };
-        let truth = layers.center + (x - layers.center) * (d / texel.depth);
-        let c = vp * truth.extend(1.0);
-        if c.w <= 0.0 {
+        let face = layers.faces[texel.face_slot];
+        let (s, t) = Face::texel_center(texel.i, texel.j, layers.res);
+        let dk = layers.distances[texel.face_slot][texel.layer];
+        let project = |p: DVec3| {
+            let c = vp * p.extend(1.0);
+            (c.w > 0.0).then(|| view.ndc_to_pixel(DVec2::new(c.x / c.w, c.y / c.w)))
+        };
+        let (Some(q), Some(l)) = (
+            project(layers.center + face.point(s, t, d)),
+            project(layers.center + face.point(s, t, dk)),
+        ) else {
             continue;
-        }
-        let q = view.ndc_to_pixel(DVec2::new(c.x / c.w, c.y / c.w));
-        out.error_px[idx] = (q - pixel).length() as f32;
+        };
+        out.error_px[idx] = (q - l).length() as f32;
+        out.gap_filled[idx] = from_closer;
     }
     out
 }
@@ -260,8 +279,8 @@ mod tests {
             j: 1,
             depth: 100.0,
         };
-        assert_eq!(l.recorded_depth(&t), Some(40.0));
+        assert_eq!(l.recorded_depth(&t), Some((40.0, true)));
         let t = LayerTexel { i: 2, ..t };
-        assert_eq!(l.recorded_depth(&t), Some(60.0));
+        assert_eq!(l.recorded_depth(&t), Some((60.0, false)));
     }
 }

@@ -17,6 +17,7 @@
 pub mod evaluate;
 pub mod image_metrics;
 pub mod report;
+pub mod run;
 pub mod stats;
 
 pub use evaluate::{evaluate_view, ViewEval};
@@ -29,6 +30,7 @@ pub use report::{
     severity_cmp, verdict, write_report, Aggregate, BundleResult, CellResult, ErrorSummary,
     ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
+pub use run::{evaluate_bundle, output_view, EvalOptions, EvalRun, ViewpointSet};
 pub use stats::{Histogram, PixelErrorStats};
 
 /// Everything that can go wrong while evaluating or writing a report.
@@ -66,6 +68,9 @@ pub enum EvalError {
     /// Encoding an image or JSON failed.
     #[error("encoding {what}: {message}")]
     Encode { what: String, message: String },
+    /// The eval job failed (bundle, scene, GPU), with the reason.
+    #[error("{0}")]
+    Job(String),
 }
 
 impl EvalError {

@@ -1,0 +1,204 @@
+//! `lemi eval BUNDLE`: the error certificate of a bake. For every evaluated cell, viewpoints at the
+//! centre, corners, face and edge midpoints and random interior points, looking along every baked
+//! face and their diagonals, at the output view the bake assumed: reference vs impostor image,
+//! measured parallax error in pixels, crack pixels, FLIP, PSNR, SSIM, coverage. Writes a JSON and
+//! static HTML report and prints one verdict line; `--require-max-px` turns it into a gate.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use lemi_eval::{EvalOptions, ViewpointSet};
+use lemi_gpu::{BackendChoice, Gpu};
+
+/// Measure how far the impostor images of a bundle are from the real geometry.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The bundle directory.
+    pub bundle: PathBuf,
+    /// Only these cells (grid coordinates `x_y_z`, comma-separated); default: every baked cell.
+    #[arg(long, value_delimiter = ',')]
+    pub cells: Vec<String>,
+    /// Random interior viewpoints per cell (besides centre, corners, face and edge midpoints).
+    #[arg(long, default_value_t = 4)]
+    pub viewpoints: usize,
+    /// Only the centre and the corners (and the random viewpoints): a quick certificate.
+    #[arg(long)]
+    pub corners_only: bool,
+    /// Seed of the random viewpoints.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output size `WIDTHxHEIGHT`; default: the bake's output width at 16:9.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Horizontal field of view in degrees; default: the bake's.
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// The scene, if it moved since the bake (checked against the bundle's fingerprint).
+    #[arg(long = "scene", value_name = "SCENE")]
+    pub scene_override: Vec<String>,
+    /// Report directory (report.json, index.html, worst views); default BUNDLE/eval.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Fail (exit status 2) when the maximum geometric error exceeds this many pixels.
+    #[arg(long, value_name = "PX")]
+    pub require_max_px: Option<f64>,
+    /// Fail (exit status 2) when any view has crack pixels.
+    #[arg(long)]
+    pub require_no_cracks: bool,
+    /// GPU backend: auto, vulkan or gl.
+    #[arg(long, default_value = "auto")]
+    pub backend: String,
+    /// Print the bundle summary as JSON (per cell under `cells`).
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}`: height: {e}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("`{s}`: width and height must be 1..=16384"));
+    }
+    Ok((w, h))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if let Some(x) = args.require_max_px {
+        if !(x.is_finite() && x >= 0.0) {
+            bail!("--require-max-px must be a number of pixels >= 0 (got {x})");
+        }
+    }
+    if let Some(f) = args.fov {
+        if !(f.is_finite() && f > 0.0 && f < 180.0) {
+            bail!("--fov must be in (0, 180) degrees (got {f})");
+        }
+    }
+    if args.viewpoints > 10_000 {
+        bail!("--viewpoints {} is absurd (at most 10000)", args.viewpoints);
+    }
+    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    let (manifest, scene) =
+        crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    for id in &args.cells {
+        if !manifest.cells.iter().any(|c| &c.id == id) {
+            let baked: Vec<&str> = manifest.cells.iter().map(|c| c.id.as_str()).collect();
+            bail!(
+                "--cells: cell {id} is not baked in {} (baked: {})",
+                args.bundle.display(),
+                baked.join(", ")
+            );
+        }
+    }
+    let options = EvalOptions {
+        cells: (!args.cells.is_empty()).then(|| args.cells.clone()),
+        set: if args.corners_only {
+            ViewpointSet::Corners
+        } else {
+            ViewpointSet::Full
+        },
+        random_viewpoints: args.viewpoints,
+        seed: args.seed,
+        size: args.size,
+        fov_x_deg: args.fov,
+        ..Default::default()
+    };
+    let gpu = Gpu::new(backend)?;
+    let bar = if args.json {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} views  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let t = std::time::Instant::now();
+    let run = lemi_eval::evaluate_bundle(
+        &gpu,
+        &args.bundle,
+        &manifest,
+        &scene,
+        &options,
+        |done, total, what| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+            bar.set_message(what.to_string());
+        },
+    )?;
+    bar.finish_and_clear();
+    let seconds = t.elapsed().as_secs_f64();
+    let dir = args
+        .report
+        .clone()
+        .unwrap_or_else(|| args.bundle.join("eval"));
+    let index = lemi_eval::write_report(&dir, &run.result, &run.worst)?;
+    let verdict = lemi_eval::verdict(&run.result);
+    let s = &run.result.summary;
+    if args.json {
+        let mut v = serde_json::to_value(&run.result)?;
+        v["verdict"] = serde_json::Value::String(verdict.clone());
+        v["placement_max_error_px"] = serde_json::json!(run.placement.max());
+        v["placement_p99_error_px"] = serde_json::json!(run.placement.p99());
+        v["gap_filled_pixels"] = serde_json::json!(run.gap_filled.count());
+        v["gap_filled_max_error_px"] = serde_json::json!(run.gap_filled.max());
+        v["seconds"] = serde_json::json!(seconds);
+        v["report"] = serde_json::json!(index);
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        let (w, h, fov) = lemi_eval::output_view(&manifest, &options);
+        println!("lemi eval");
+        println!("adapter    {}", gpu.describe());
+        println!(
+            "views      {} in {} cells at {w}x{h}, {fov}° horizontal, in {seconds:.1} s ({:.2} s per view)",
+            s.views,
+            run.result.cells.len(),
+            seconds / s.views.max(1) as f64
+        );
+        for c in &run.result.cells {
+            println!(
+                "cell {:<6} max {:.2} px, p99 {:.2} px, mean {:.3} px, {:.3} % above 1 px, {} crack pixels, FLIP {:.3}, coverage {:.4}",
+                c.cell,
+                c.summary.max_error_px,
+                c.summary.p99_error_px,
+                c.summary.mean_error_px,
+                100.0 * c.summary.above_1px,
+                c.summary.crack_pixels,
+                c.summary.mean_flip,
+                c.summary.coverage
+            );
+        }
+        if let Some(split) = run.result.info.get("error split") {
+            println!("split      {split}");
+        }
+        println!("report     {}", index.display());
+        println!("verdict    {verdict}");
+    }
+    let mut failed = Vec::new();
+    if let Some(x) = args.require_max_px {
+        if s.max_error_px as f64 > x {
+            failed.push(format!(
+                "maximum error {:.2} px exceeds --require-max-px {x}",
+                s.max_error_px
+            ));
+        }
+    }
+    if args.require_no_cracks && s.crack_pixels > 0 {
+        failed.push(format!(
+            "{} crack pixels (--require-no-cracks)",
+            s.crack_pixels
+        ));
+    }
+    if !failed.is_empty() {
+        eprintln!("error: certificate failed: {}", failed.join("; "));
+        std::process::exit(2);
+    }
+    Ok(())
+}

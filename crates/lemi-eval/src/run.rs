@@ -1,0 +1,331 @@
+//! The eval job: for every evaluated cell of a bundle, viewpoints at the centre, the corners, the
+//! face and edge midpoints and random interior points ([`lemi_core::cell::eval_viewpoints`]), view
+//! directions covering every baked face and their diagonals
+//! ([`lemi_core::cell::eval_directions`]), each rendered as reference (all geometry) and impostor
+//! image (near geometry + quads) at the output view the bake assumed, compared by
+//! [`crate::evaluate_view`] with the measured per-pixel parallax error
+//! ([`lemi_core::parallax_error`]; the layers' per-texel depths are re-recorded for it).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::DVec3;
+use lemi_bake::Baker;
+use lemi_core::bundle::{CellFile, Manifest};
+use lemi_core::camera::Camera;
+use lemi_core::cell::{eval_directions, eval_viewpoints, ViewCell};
+use lemi_core::parallax_error::{pixel_errors, LayerDepths};
+use lemi_core::Scene;
+use lemi_gpu::{
+    Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions, Renderer,
+    UploadOptions,
+};
+
+use crate::report::{BundleResult, CellResult, WorstSet, WorstView};
+use crate::{evaluate_view, ppd_for_view, EvalError, PixelErrorStats, WORST_PER_BUNDLE};
+
+/// Which viewpoints of a cell to evaluate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewpointSet {
+    /// Centre, 8 corners, 6 face midpoints, 12 edge midpoints and the random ones.
+    Full,
+    /// Centre and the 8 corners (and the random ones).
+    Corners,
+}
+
+/// Parameters of an evaluation.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// Cell ids to evaluate (`None`: every baked cell).
+    pub cells: Option<Vec<String>>,
+    pub set: ViewpointSet,
+    /// Random interior viewpoints per cell.
+    pub random_viewpoints: usize,
+    pub seed: u64,
+    /// Output size; default: the bake's output width at 16:9 (1280×720 without one).
+    pub size: Option<(u32, u32)>,
+    /// Horizontal field of view in degrees; default: the bake's (60° without one).
+    pub fov_x_deg: Option<f64>,
+    /// Background colour of both renders.
+    pub clear: [u8; 4],
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            cells: None,
+            set: ViewpointSet::Full,
+            random_viewpoints: 4,
+            seed: 1,
+            size: None,
+            fov_x_deg: None,
+            clear: [150, 190, 235, 255],
+        }
+    }
+}
+
+/// The result of [`evaluate_bundle`].
+pub struct EvalRun {
+    pub result: BundleResult,
+    pub worst: Vec<WorstView>,
+    /// The error of pixels showing a layer's own texels: the placement's parallax error.
+    pub placement: PixelErrorStats,
+    /// The error of pixels showing gap-filled texels (GI 2002 sec. 5.1).
+    pub gap_filled: PixelErrorStats,
+}
+
+/// The geometric error split into own and gap-filled texels.
+struct Breakdown {
+    cell: String,
+    own: PixelErrorStats,
+    gap: PixelErrorStats,
+}
+
+impl Breakdown {
+    fn describe(&self) -> String {
+        let n = (self.own.count() + self.gap.count()).max(1) as f64;
+        format!(
+            "layers' own texels: max {:.2} px, p99 {:.2} px over {} pixels; gap-filled texels: \
+             {:.2} % of impostor pixels, max {:.2} px, p99 {:.2} px",
+            self.own.max(),
+            self.own.p99(),
+            self.own.count(),
+            100.0 * self.gap.count() as f64 / n,
+            self.gap.max(),
+            self.gap.p99()
+        )
+    }
+}
+
+fn err(m: impl Into<String>) -> EvalError {
+    EvalError::Job(m.into())
+}
+
+/// Output size and horizontal fov of an evaluation.
+pub fn output_view(manifest: &Manifest, options: &EvalOptions) -> (u32, u32, f64) {
+    let fov = options
+        .fov_x_deg
+        .or(manifest.params.output_fov_deg)
+        .unwrap_or(60.0);
+    let (w, h) = options.size.unwrap_or_else(|| {
+        let w = manifest.params.output_width.unwrap_or(1280);
+        (w, (w * 9 / 16).max(1))
+    });
+    (w, h, fov)
+}
+
+/// A camera at `eye` looking along `dir` with horizontal fov `fov_x` (degrees).
+fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Camera, EvalError> {
+    let fov_y = 2.0
+        * ((0.5 * fov_x.to_radians()).tan() * h as f64 / w as f64)
+            .atan()
+            .to_degrees();
+    let up = if dir.normalize().y.abs() > 0.9 {
+        DVec3::Z
+    } else {
+        DVec3::Y
+    };
+    Camera::new(eye, dir, up, fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
+}
+
+/// Reads a baked cell of the bundle and checks it against the manifest.
+fn read_cell(bundle: &Path, manifest: &Manifest, id: &str) -> Result<CellFile, EvalError> {
+    let entry = manifest
+        .cells
+        .iter()
+        .find(|c| c.id == id)
+        .ok_or_else(|| err(format!("cell {id} is not baked in {}", bundle.display())))?;
+    let path = bundle.join(&entry.file);
+    let bytes = std::fs::read(&path).map_err(|e| EvalError::io(path.display().to_string(), e))?;
+    if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
+        return Err(err(format!(
+            "{}: does not match the manifest's hash (changed or damaged after baking)",
+            path.display()
+        )));
+    }
+    CellFile::decode(&bytes).map_err(|e| err(format!("{}: {e}", path.display())))
+}
+
+/// The depth range a crack test allows at reference view depth `r`: one layer's slab (the slab
+/// containing `r`, infinite for the farthest) plus the cell's diagonal (the view depth from a
+/// viewpoint off the centre differs from the distance to the centre by at most that).
+fn slab_tolerance(file: &CellFile, cell: &ViewCell, r: f32) -> f32 {
+    let diag = 2.0 * cell.half.length();
+    let Some(layers) = file.header.layers.first() else {
+        return f32::INFINITY;
+    };
+    let r = r as f64;
+    if r < file.header.near_field {
+        return diag as f32;
+    }
+    for l in layers {
+        if r >= l.near_border {
+            return if l.far_border >= f64::MAX {
+                f32::INFINITY
+            } else {
+                (l.far_border - l.near_border + diag) as f32
+            };
+        }
+    }
+    diag as f32
+}
+
+/// Evaluates the cells of a bundle. `progress(done, total, what)` is called before every view.
+pub fn evaluate_bundle(
+    gpu: &Gpu,
+    bundle: &Path,
+    manifest: &Manifest,
+    scene: &Scene,
+    options: &EvalOptions,
+    mut progress: impl FnMut(usize, usize, &str),
+) -> Result<EvalRun, EvalError> {
+    let ids: Vec<String> = match &options.cells {
+        Some(c) => c.clone(),
+        None => manifest.cells.iter().map(|c| c.id.clone()).collect(),
+    };
+    if ids.is_empty() {
+        return Err(err(format!("{}: no cells to evaluate", bundle.display())));
+    }
+    let (w, h, fov_x) = output_view(manifest, options);
+    if w == 0 || h == 0 || !(fov_x > 0.0 && fov_x < 180.0) {
+        return Err(err(format!(
+            "output view {w}x{h} with {fov_x}° horizontal fov is not usable"
+        )));
+    }
+    let ppd = ppd_for_view(w, fov_x as f32);
+    let gpu_err = |what: &str| {
+        let what = what.to_string();
+        move |e: lemi_gpu::GpuError| err(format!("{what}: {e}"))
+    };
+    let materials = Arc::new(
+        GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
+            .map_err(gpu_err("uploading materials"))?,
+    );
+    let full = GpuScene::upload(gpu, scene, &UploadOptions::default())
+        .map_err(gpu_err("uploading the scene"))?;
+    let reference_renderer = Renderer::new(gpu).map_err(gpu_err("reference renderer"))?;
+    let impostor_renderer = ImpostorRenderer::new(gpu).map_err(gpu_err("impostor renderer"))?;
+    let baker = Baker::new(gpu, scene, manifest.params.clone())
+        .map_err(|e| err(format!("preparing to re-record depths: {e}")))?;
+    let render_options = RenderOptions {
+        clear: options.clear,
+        ..Default::default()
+    };
+    let directions = eval_directions(&manifest.params.faces);
+    let mut cells = Vec::with_capacity(ids.len());
+    let mut worst = WorstSet::new(WORST_PER_BUNDLE);
+    let mut points_per_cell = Vec::new();
+    let mut breakdown = Vec::new();
+    for id in &ids {
+        let cell = manifest
+            .grid
+            .parse_id(id)
+            .map_err(|e| err(format!("--cells: {e}")))?;
+        let mut points = eval_viewpoints(&cell, options.random_viewpoints, options.seed);
+        if options.set == ViewpointSet::Corners {
+            points.retain(|(l, _)| {
+                l == "centre" || l.starts_with("corner") || l.starts_with("random")
+            });
+        }
+        points_per_cell.push((cell, points));
+    }
+    let total: usize = points_per_cell
+        .iter()
+        .map(|(_, p)| p.len() * directions.len())
+        .sum();
+    let mut done = 0;
+    for (cell, points) in &points_per_cell {
+        let id = cell.id();
+        let file = read_cell(bundle, manifest, &id)?;
+        let macros = file
+            .decode_macros()
+            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        let gpu_cell = ImpostorCell::upload(
+            gpu,
+            materials.clone(),
+            scene,
+            &file.near,
+            &file.header.quads,
+            &macros,
+        )
+        .map_err(gpu_err(&format!("uploading cell {id}")))?;
+        progress(
+            done,
+            total,
+            &format!("cell {id}: re-recording layer depths"),
+        );
+        let depths: LayerDepths = baker
+            .record_depths(cell)
+            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        let mut stats = PixelErrorStats::new();
+        let mut own = PixelErrorStats::new();
+        let mut gap = PixelErrorStats::new();
+        let mut views = Vec::new();
+        for (label, eye) in points {
+            for (dname, dir) in &directions {
+                progress(done, total, &format!("cell {id}: {label}, looking {dname}"));
+                done += 1;
+                let cam = camera(*eye, *dir, fov_x, w, h)?;
+                let view = cam.view();
+                let reference = reference_renderer
+                    .render(&full, &view, &render_options)
+                    .map_err(gpu_err("reference render"))?;
+                let impostor = impostor_renderer
+                    .render(&gpu_cell, &view, &render_options)
+                    .map_err(gpu_err("impostor render"))?;
+                let geometric = pixel_errors(&view, &impostor.depth, &depths, 1e-4);
+                for (e, &g) in geometric.error_px.iter().zip(&geometric.gap_filled) {
+                    if g {
+                        gap.add(*e);
+                    } else {
+                        own.add(*e);
+                    }
+                }
+                let tol = |_: usize, r: f32| slab_tolerance(&file, cell, r);
+                let e = evaluate_view(&reference, &impostor, &geometric.error_px, &tol, ppd)?;
+                stats.merge(&e.error);
+                let label = format!("{label}, looking {dname}");
+                let r = e.result(&id, &label, eye.to_array(), dir.to_array());
+                worst.offer(&r, || WorstView {
+                    label: format!("cell {id}, {label}"),
+                    reference,
+                    impostor,
+                    flip_heatmap: e.flip.heatmap_rgba.clone(),
+                });
+                views.push(r);
+            }
+        }
+        breakdown.push(Breakdown {
+            cell: id.clone(),
+            own,
+            gap,
+        });
+        cells.push(CellResult::new(id, views, stats));
+    }
+    let mut own = PixelErrorStats::new();
+    let mut gap = PixelErrorStats::new();
+    for b in &breakdown {
+        own.merge(&b.own);
+        gap.merge(&b.gap);
+    }
+    let mut result = BundleResult::new(cells)
+        .with_info("bundle", bundle.display().to_string())
+        .with_info("output view", format!("{w}x{h}, {fov_x}° horizontal"))
+        .with_info("scene", manifest.scene.sources.join(" "))
+        .with_info("adapter", gpu.describe());
+    for b in &breakdown {
+        result = result.with_info(format!("cell {}: error split", b.cell), b.describe());
+    }
+    let total = Breakdown {
+        cell: "all".into(),
+        own,
+        gap,
+    };
+    result = result.with_info("error split", total.describe());
+    Ok(EvalRun {
+        result,
+        worst: worst.into_worst_views(),
+        placement: total.own,
+        gap_filled: total.gap,
+    })
+}
