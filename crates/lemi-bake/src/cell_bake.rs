@@ -332,6 +332,7 @@ impl<'a> Baker<'a> {
             faces: Vec::new(),
             depths: Vec::new(),
             opaque_recorded: 0,
+            near_seam_texels: 0,
             clip_seconds: 0.0,
         };
         for (slot, (&face, placement)) in self.params.faces.iter().zip(placements).enumerate() {
@@ -392,6 +393,23 @@ impl<'a> Baker<'a> {
             if depths_only {
                 out.depths.push(depths);
             } else {
+                if let Some(inner) = images.last_mut() {
+                    let along = cell.half.abs().dot(face.forward().abs());
+                    let near = self.prepare_slab(&class.near, center, face, along, near_field);
+                    let frame = self
+                        .recorder
+                        .record(
+                            &self.materials,
+                            DVec3::ZERO,
+                            face,
+                            &near.vertices,
+                            &near.runs,
+                            0.5 * along.max(1e-3),
+                            &self.lighting,
+                        )
+                        .map_err(|e| cell_err(format!("recording face {face} near field: {e}")))?;
+                    out.near_seam_texels += close_near_seam(inner, &frame.rgba);
+                }
                 out.faces.push(FaceLayers {
                     face,
                     distances: placement.layers.iter().map(|l| l.distance).collect(),
@@ -447,7 +465,36 @@ struct Recorded {
     faces: Vec<FaceLayers>,
     depths: Vec<Vec<Vec<f32>>>,
     opaque_recorded: u64,
+    /// Texels added to the innermost layers by [`close_near_seam`].
+    near_seam_texels: u64,
     clip_seconds: f64,
+}
+
+/// Closes the seam between the near geometry and the innermost layer: the near geometry is drawn
+/// exactly, the innermost layer with up to α of parallax, so a surface crossing the near-field
+/// border can open a gap of up to a pixel between them (found by the no-crack test). Gap filling
+/// (GI 2002 sec. 5.1) closes such gaps between two layers; here the near field plays the closer
+/// layer: every transparent texel of the innermost layer that touches one of its opaque texels
+/// (8-neighbourhood) and where the near geometry just inside the border (recorded into `near`, the
+/// same face projection) is opaque takes the near geometry's colour. The added texels are flagged
+/// as clip-border texels, so they never hide farther layers. Returns the number of texels added.
+pub fn close_near_seam(inner: &mut LayerImage, near: &[u8]) -> u64 {
+    let res = inner.res as usize;
+    if near.len() != inner.rgba.len() {
+        return 0;
+    }
+    let opaque = inner.opaque_mask();
+    let touches = lemi_core::compress::layer_image::any3x3(&opaque, inner.res, false);
+    let mut added = 0;
+    for i in 0..res * res {
+        if !opaque[i] && touches[i] && near[4 * i + 3] >= 128 {
+            let c = [near[4 * i], near[4 * i + 1], near[4 * i + 2], 255];
+            inner.set_texel(i, c);
+            inner.border[i] = true;
+            added += 1;
+        }
+    }
+    added
 }
 
 /// The clipped triangles of one slab and their material runs.

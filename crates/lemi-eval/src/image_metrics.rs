@@ -321,11 +321,14 @@ pub fn coverage(reference: &Frame, test: &Frame) -> Result<Coverage, EvalError> 
     })
 }
 
-/// Crack pixels: where the reference has geometry (finite depth) and the test shows background
-/// (non-finite depth), or the test's depth exceeds the reference's by more than
-/// `far_tolerance(pixel_index, reference_depth)` — the caller passes one layer's depth range there,
-/// so a test surface "one layer too far" counts as seen through a crack. A test depth *nearer* than
-/// the reference is never a crack. `pixel_index` is row-major `y * width + x`.
+/// Crack pixels: inside a surface of the reference (the pixel and its in-image 8 neighbours all have
+/// finite depth), the test shows background (non-finite depth), or its depth exceeds the
+/// reference's by more than `far_tolerance(pixel_index, reference_depth)` — the caller passes one
+/// layer's depth range there, so a test surface "one layer too far" counts as seen through a crack.
+/// A test depth *nearer* than the reference is never a crack. Silhouette pixels of the reference are
+/// not judged: an impostor may move a silhouette by its allowed sub-pixel error, which the geometric
+/// error measures; a crack is a hole where a surface continues. `pixel_index` is row-major
+/// `y * width + x`.
 pub fn crack_pixels(
     reference: &Frame,
     test: &Frame,
@@ -336,8 +339,19 @@ pub fn crack_pixels(
     let mut mask = vec![false; reference.depth.len()];
     let mut first = Vec::new();
     let mut count = 0u64;
+    let height = reference.depth.len() / width;
+    let interior = |i: usize| {
+        let (x, y) = ((i % width) as i64, (i / width) as i64);
+        (-1..=1).all(|dy: i64| {
+            (-1..=1).all(|dx: i64| {
+                let (xx, yy) = (x + dx, y + dy);
+                !((0..width as i64).contains(&xx) && (0..height as i64).contains(&yy))
+                    || reference.depth[(yy as usize) * width + xx as usize].is_finite()
+            })
+        })
+    };
     for (i, (&r, &t)) in reference.depth.iter().zip(&test.depth).enumerate() {
-        if !r.is_finite() {
+        if !r.is_finite() || !interior(i) {
             continue;
         }
         // A NaN tolerance or difference counts as a crack too (not provably within tolerance).

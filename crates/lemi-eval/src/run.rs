@@ -281,7 +281,21 @@ pub fn evaluate_bundle(
                         own.add(*e);
                     }
                 }
-                let tol = |_: usize, r: f32| slab_tolerance(&file, cell, r);
+                // A surface may legitimately move by its sub-pixel error, so at a depth edge the
+                // impostor may show the farther neighbour: allow the farthest reference depth of
+                // the 3×3 neighbourhood plus one slab there.
+                let wi = w as usize;
+                let hi = h as usize;
+                let tol = |i: usize, r: f32| {
+                    let (x, y) = (i % wi, i / wi);
+                    let mut far = r;
+                    for yy in y.saturating_sub(1)..(y + 2).min(hi) {
+                        for xx in x.saturating_sub(1)..(x + 2).min(wi) {
+                            far = far.max(reference.depth[yy * wi + xx]);
+                        }
+                    }
+                    (far - r) + slab_tolerance(&file, cell, far)
+                };
                 let e = evaluate_view(&reference, &impostor, &geometric.error_px, &tol, ppd)?;
                 stats.merge(&e.error);
                 let label = format!("{label}, looking {dname}");

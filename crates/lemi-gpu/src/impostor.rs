@@ -58,13 +58,25 @@ pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 struct QuadVertex {
     position: [f32; 3],
+    /// Macro-texture coordinates in texels (not normalised).
     uv: [f32; 2],
+    /// The quad's texel rectangle in the macro-texture `[x0, y0, x1, y1]` (same for all four
+    /// vertices): the fragment shader clamps its fetch to it.
+    rect: [f32; 4],
 }
 
-const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![
+const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![
     0 => Float32x3,
     1 => Float32x2,
+    2 => Float32x4,
 ];
+
+/// How far (in texels of its layer) every quad is grown beyond its texel rectangle, so that
+/// neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
+/// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
+/// (found by the no-crack test). The grown rim shows the quad's edge texels (the fetch is clamped
+/// to the rectangle), so it never shows a neighbour's texels from the macro-texture.
+pub const QUAD_GROWTH_TEXELS: f64 = 1.0 / 16.0;
 
 fn quad_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
     wgpu::VertexBufferLayout {
@@ -367,15 +379,32 @@ fn quad_geometry(quads: &[Quad], macros: &[MacroTexture]) -> Result<QuadGeometry
     let mut draws: Vec<(u16, MacroDraw)> = Vec::new();
     for &k in &order {
         let q = &quads[k];
-        let Some(m) = macros.get(q.macro_index as usize) else {
+        if macros.get(q.macro_index as usize).is_none() {
             continue;
-        };
-        let (mw, mh) = (m.width as f64, m.height as f64);
+        }
         let base = vertices.len() as u32;
-        for (corner, texel) in q.corners.iter().zip(q.macro_texel_corners()) {
+        let uv = q
+            .macro_texel_corners()
+            .map(|t| glam::DVec2::new(t[0] as f64, t[1] as f64));
+        let p = q.corners.map(|c| glam::DVec3::from_array(c.map(f64::from)));
+        // texel steps along the quad's edges (in world space and in the macro-texture)
+        let (w, h) = (
+            (q.texels[2].saturating_sub(q.texels[0])).max(1) as f64,
+            (q.texels[3].saturating_sub(q.texels[1])).max(1) as f64,
+        );
+        let e = QUAD_GROWTH_TEXELS;
+        let (du, dv) = ((p[1] - p[0]) * (e / w), (p[3] - p[0]) * (e / h));
+        let (tu, tv) = ((uv[1] - uv[0]) * (e / w), (uv[3] - uv[0]) * (e / h));
+        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        let [x, y, rw, rh] = q.rect;
+        let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
+        for ((pk, uvk), (su, sv)) in p.iter().zip(&uv).zip(signs) {
+            let pos = *pk + du * su + dv * sv;
+            let t = *uvk + tu * su + tv * sv;
             vertices.push(QuadVertex {
-                position: *corner,
-                uv: [(texel[0] as f64 / mw) as f32, (texel[1] as f64 / mh) as f32],
+                position: pos.as_vec3().to_array(),
+                uv: [t.x as f32, t.y as f32],
+                rect,
             });
         }
         let first = indices.len() as u32;

@@ -5,18 +5,24 @@
 // Target 0: Rgba8UnormSrgb colour, alpha 1 where drawn. Target 1: R32Uint holding the bits of the
 // f32 linear view depth.
 //
+// The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle); the sampler
+// binding stays in the layout for filtering modes to come.
 // Group 1 holds the macro-texture at bindings 3 and 4 so that they never alias the material
 // bindings 0..=2 the shading module declares (unused here).
 
 struct QuadIn {
     @location(0) position: vec3<f32>,
+    // macro-texture coordinates in texels
     @location(1) uv: vec2<f32>,
+    // the quad's texel rectangle [x0, y0, x1, y1] in the macro-texture
+    @location(2) rect: vec4<f32>,
 };
 
 struct QuadOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) uv: vec2<f32>,
     @location(1) view_depth: f32,
+    @location(2) @interpolate(flat) rect: vec4<f32>,
 };
 
 struct QuadFragmentOut {
@@ -34,13 +40,17 @@ fn vs_quad(v: QuadIn) -> QuadOut {
     var out: QuadOut;
     out.clip = globals.clip_from_rel * vec4<f32>(rel, 1.0);
     out.uv = v.uv;
+    out.rect = v.rect;
     out.view_depth = dot(globals.depth_axis.xyz, rel);
     return out;
 }
 
 @fragment
 fn fs_quad(in: QuadOut) -> QuadFragmentOut {
-    let t = textureSample(macro_texture, macro_sampler, in.uv);
+    // Nearest texel, clamped to the quad's own rectangle: the quad is grown a little beyond it
+    // (QUAD_GROWTH_TEXELS) and must never fetch a neighbour's texels or the transparent gap.
+    let texel = clamp(floor(in.uv), in.rect.xy, in.rect.zw - vec2<f32>(1.0, 1.0));
+    let t = textureLoad(macro_texture, vec2<i32>(texel), 0);
     if (t.a < globals.params.y) {
         discard;
     }

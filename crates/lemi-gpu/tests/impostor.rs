@@ -53,7 +53,7 @@ fn quad(
     Quad {
         face: Face::NegZ,
         layer,
-        texels: [0, 0, 1, 1],
+        texels: [0, 0, rect[2] as u16, rect[3] as u16],
         corners: [p(x0, y1), p(x1, y1), p(x1, y0), p(x0, y0)],
         macro_index,
         rect,
@@ -190,6 +190,12 @@ fn quad_shows_its_texels_exactly() {
     let area = [19.2, 44.8, 19.2, 44.8];
     let checked = check_image(&f, area, (4, 4), test_image, clear, 5.0);
     assert!(checked > 400, "checked {checked} pixels");
+    // The quad is grown by a sixteenth of a texel, but never shows the macro-texture around its
+    // rectangle (magenta here): the fetch is clamped to the rectangle.
+    assert!(
+        f.rgba.chunks_exact(4).all(|p| p != [255, 0, 255, 255]),
+        "a neighbouring macro-texel leaked into the quad"
+    );
     // Outside the quad: background.
     for (x, y) in [(0, 0), (18, 32), (45, 32), (32, 18), (32, 45), (63, 63)] {
         assert_eq!(f.pixel(x, y), Some(clear), "background at {x},{y}");

@@ -1,0 +1,126 @@
+//! The error certificate on a real (small) bake: from the centre and the corners of a cell, the
+//! layers' own texels stay within one output pixel of their true position, and nothing is missing;
+//! with the layers deliberately too sparse (placed for four times the allowed angle) the same
+//! measurement fails, so the metric has teeth.
+//!
+//! Without an adapter the GPU tests fail with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
+
+use std::path::Path;
+
+use glam::DVec3;
+use lemi_bake::{BakeJob, Baker};
+use lemi_core::bundle::{BakeParams, LayerTarget, Manifest, SceneRef};
+use lemi_core::cell::CellGrid;
+use lemi_core::placement::{alpha_from_output_view, PixelChoice};
+use lemi_core::{Aabb, Face, Scene};
+use lemi_eval::{evaluate_bundle, EvalOptions, EvalRun, ViewpointSet};
+use lemi_gpu::{BackendChoice, Gpu};
+
+fn gpu() -> Option<Gpu> {
+    match Gpu::new(BackendChoice::Auto) {
+        Ok(g) => Some(g),
+        Err(e) => {
+            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
+                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
+                None
+            } else {
+                panic!("{e}");
+            }
+        }
+    }
+}
+
+const W: u32 = 256;
+const H: u32 = 144;
+const FOV: f64 = 60.0;
+
+/// Bakes one 10 m cell of a small city on the avenue with α = `alpha_scale` × the output view's
+/// edge pixel, and evaluates it from the centre and the corners.
+fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> EvalRun {
+    let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
+    let params = BakeParams {
+        cell_size: 10.0,
+        resolution: 256,
+        target: LayerTarget::Layers(24),
+        faces: Face::HORIZONTAL.to_vec(),
+        alpha: alpha * alpha_scale,
+        output_fov_deg: Some(FOV),
+        output_width: Some(W),
+        micro_grid: 8,
+        micro_threshold: 0.6,
+    };
+    let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
+    let grid = CellGrid::tile(region, 10.0).unwrap();
+    let job = BakeJob {
+        bundle: dir.to_path_buf(),
+        scene: SceneRef {
+            sources: vec!["builtin:city:30k:2".into()],
+            up: "y".into(),
+            fingerprint: "test".into(),
+            triangles: scene.triangle_count(),
+        },
+        params: params.clone(),
+        cells: grid.cells(),
+        grid,
+        shard: None,
+    };
+    let baker = Baker::new(gpu, scene, params).unwrap();
+    lemi_bake::run(&job, |c| baker.bake(c, |_| {}), |_, _, _| {}).unwrap();
+    let manifest = Manifest::read(dir).unwrap();
+    let options = EvalOptions {
+        set: ViewpointSet::Corners,
+        random_viewpoints: 0,
+        size: Some((W, H)),
+        ..Default::default()
+    };
+    evaluate_bundle(gpu, dir, &manifest, scene, &options, |_, _, _| {}).unwrap()
+}
+
+#[test]
+fn placement_error_stays_within_a_pixel_and_too_few_layers_fail() {
+    let Some(gpu) = gpu() else { return };
+    let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+
+    let good = bake_and_eval(&gpu, &scene, &tmp.path().join("good"), 1.0);
+    let s = &good.result.summary;
+    eprintln!(
+        "placed for 1 px: own texels max {:.3} px p99 {:.3} px over {} pixels; gap-filled {} pixels max {:.3}; cracks {}; views {}",
+        good.placement.max(),
+        good.placement.p99(),
+        good.placement.count(),
+        good.gap_filled.count(),
+        good.gap_filled.max(),
+        s.crack_pixels,
+        s.views
+    );
+    assert_eq!(s.views, 9 * 8, "centre + 8 corners, 4 axes + 4 diagonals");
+    assert!(
+        good.placement.count() > 10_000,
+        "impostor pixels were measured"
+    );
+    // The layers' own texels: at most one pixel (α is the edge pixel, the smallest), plus a
+    // rasterisation tolerance of 0.05 px (f32 depth and texel-centre rounding).
+    assert!(
+        good.placement.max() <= 1.05,
+        "placement error {} px",
+        good.placement.max()
+    );
+    // Gap-filled texels show the next closer slab one layer too far: at most about two slabs.
+    assert!(good.gap_filled.max() <= 3.1, "{}", good.gap_filled.max());
+    assert_eq!(s.crack_pixels, 0, "no pixel where geometry is missing");
+    assert!(s.coverage > 0.999, "coverage {}", s.coverage);
+
+    // Teeth: layers placed for four times the allowed angle are too sparse.
+    let bad = bake_and_eval(&gpu, &scene, &tmp.path().join("bad"), 4.0);
+    eprintln!(
+        "placed for 4 px: own texels max {:.3} px p99 {:.3} px",
+        bad.placement.max(),
+        bad.placement.p99()
+    );
+    assert!(
+        bad.placement.max() > 1.5,
+        "too sparse layers must show errors above a pixel, got {}",
+        bad.placement.max()
+    );
+}
