@@ -859,7 +859,7 @@ mod tests {
         Quad {
             face: Face::NegZ,
             layer,
-            texels: [0, 0, 1, 1],
+            texels: [0, 0, rect[2] as u16, rect[3] as u16],
             corners: [[0.0; 3]; 4],
             macro_index,
             rect,
@@ -907,9 +907,12 @@ mod tests {
                 },
             ]
         );
-        // first quad of macro 0 is the layer-3 one: rect [2, 0, 2, 2] of 8x8
-        assert_eq!(v[0].uv, [0.25, 0.0]);
-        assert_eq!(v[2].uv, [0.5, 0.25]);
+        // first quad of macro 0 is the layer-3 one: rect [2, 0, 2, 2] of 8x8, texel coordinates,
+        // grown by QUAD_GROWTH_TEXELS on every side; the fetch is clamped to the rectangle
+        let g = QUAD_GROWTH_TEXELS as f32;
+        assert_eq!(v[0].uv, [2.0 - g, -g]);
+        assert_eq!(v[2].uv, [4.0 + g, 2.0 + g]);
+        assert_eq!(v[0].rect, [2.0, 0.0, 4.0, 2.0]);
     }
 
     #[test]
