@@ -40,9 +40,14 @@ pub struct Args {
     /// Report directory (report.json, index.html, worst views); default BUNDLE/eval.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Fail (exit status 2) when the maximum geometric error exceeds this many pixels.
+    /// Fail (exit status 2) when the maximum geometric error (all impostor pixels) exceeds this
+    /// many pixels.
     #[arg(long, value_name = "PX")]
     pub require_max_px: Option<f64>,
+    /// Fail (exit status 2) when the maximum placement error (pixels showing a layer's own texels,
+    /// i.e. not gap-filled ones) exceeds this many pixels: the bound the layer placement promises.
+    #[arg(long, value_name = "PX")]
+    pub require_placement_max_px: Option<f64>,
     /// Fail (exit status 2) when any view has crack pixels.
     #[arg(long)]
     pub require_no_cracks: bool,
@@ -70,9 +75,14 @@ fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    if let Some(x) = args.require_max_px {
-        if !(x.is_finite() && x >= 0.0) {
-            bail!("--require-max-px must be a number of pixels >= 0 (got {x})");
+    for (flag, v) in [
+        ("--require-max-px", args.require_max_px),
+        ("--require-placement-max-px", args.require_placement_max_px),
+    ] {
+        if let Some(x) = v {
+            if !(x.is_finite() && x >= 0.0) {
+                bail!("{flag} must be a number of pixels >= 0 (got {x})");
+            }
         }
     }
     if let Some(f) = args.fov {
@@ -140,7 +150,14 @@ pub fn run(args: Args) -> Result<()> {
         .clone()
         .unwrap_or_else(|| args.bundle.join("eval"));
     let index = lemi_eval::write_report(&dir, &run.result, &run.worst)?;
-    let verdict = lemi_eval::verdict(&run.result);
+    let verdict = format!(
+        "{}; placement (layers' own texels) max {:.2} px, gap-filled texels max {:.2} px ({:.2} % of impostor pixels)",
+        lemi_eval::verdict(&run.result),
+        run.placement.max(),
+        run.gap_filled.max(),
+        100.0 * run.gap_filled.count() as f64
+            / (run.placement.count() + run.gap_filled.count()).max(1) as f64
+    );
     let s = &run.result.summary;
     if args.json {
         let mut v = serde_json::to_value(&run.result)?;
@@ -187,6 +204,14 @@ pub fn run(args: Args) -> Result<()> {
             failed.push(format!(
                 "maximum error {:.2} px exceeds --require-max-px {x}",
                 s.max_error_px
+            ));
+        }
+    }
+    if let Some(x) = args.require_placement_max_px {
+        if run.placement.max() as f64 > x {
+            failed.push(format!(
+                "placement error {:.2} px exceeds --require-placement-max-px {x}",
+                run.placement.max()
             ));
         }
     }
