@@ -512,6 +512,13 @@ pub fn validate_params(p: &BakeParams) -> Result<(), BakeError> {
             p.cell_size
         ));
     }
+    if let Some(h) = p.cell_height {
+        if !(h.is_finite() && h > 0.0) {
+            return bad(format!(
+                "--cell-height must be a positive number of metres (got {h})"
+            ));
+        }
+    }
     if !(16..=8192).contains(&p.resolution) {
         return bad(format!(
             "--resolution must be between 16 and 8192 texels (got {})",

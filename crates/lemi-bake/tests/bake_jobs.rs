@@ -48,6 +48,7 @@ fn gpu() -> Option<Gpu> {
 fn params() -> BakeParams {
     BakeParams {
         cell_size: 10.0,
+        cell_height: None,
         resolution: 64,
         target: LayerTarget::Layers(4),
         faces: Face::HORIZONTAL.to_vec(),

@@ -365,6 +365,7 @@ fn params(faces: &[Face]) -> BakeParams {
         .expect("alpha of the output view");
     BakeParams {
         cell_size: 2.0 * HALF,
+        cell_height: None,
         resolution: RES,
         target: LayerTarget::Layers(LAYERS),
         faces: faces.to_vec(),

@@ -52,6 +52,10 @@ pub struct Args {
     /// View-cell side in metres.
     #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
     pub cell_size: f64,
+    /// View-cell height in metres (the eye-height range a ground-level viewer moves in); default:
+    /// the cell size (cubic cells).
+    #[arg(long, allow_hyphen_values = true)]
+    pub cell_height: Option<f64>,
     /// Texels per cube-face side (Res).
     #[arg(long, default_value_t = 512)]
     pub resolution: u32,
@@ -218,8 +222,14 @@ pub fn run(args: Args) -> Result<()> {
             (a, Some(fov), Some(width))
         }
     };
+    if let Some(h) = args.cell_height {
+        if !(h.is_finite() && h > 0.0) {
+            bail!("--cell-height must be a positive number of metres (got {h})");
+        }
+    }
     let params = BakeParams {
         cell_size: args.cell_size,
+        cell_height: args.cell_height,
         resolution: args.resolution,
         target,
         faces,
@@ -279,7 +289,8 @@ pub fn run(args: Args) -> Result<()> {
             )
         }
     };
-    let grid = CellGrid::tile(region, args.cell_size).context("--region/--cell-size")?;
+    let grid = CellGrid::tile_with_height(region, args.cell_size, args.cell_height)
+        .context("--region/--cell-size/--cell-height")?;
     let cells: Vec<ViewCell> = if args.cells.is_empty() {
         grid.cells()
     } else {
@@ -433,14 +444,18 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("adapter    {}", gpu.describe());
     println!(
-        "cells      {} ({} baked, {} skipped as already baked) of a {}x{}x{} grid of {} m cells",
+        "cells      {} ({} baked, {} skipped as already baked) of a {}x{}x{} grid of {} m cells{}",
         per_cell.len(),
         baked,
         skipped,
         job.grid.counts.x,
         job.grid.counts.y,
         job.grid.counts.z,
-        params.cell_size
+        params.cell_size,
+        params
+            .cell_height
+            .map(|h| format!(", {h} m tall"))
+            .unwrap_or_default()
     );
     let n = per_cell.len().max(1) as f64;
     println!(

@@ -22,6 +22,9 @@ pub struct Args {
     /// View-cell side in metres.
     #[arg(long, default_value_t = 10.0)]
     pub cell: f64,
+    /// View-cell height in metres: the eye-height range around 1.7 m the viewer walks in.
+    #[arg(long, default_value_t = 1.0)]
+    pub cell_height: f64,
     /// Number of cells in the strip.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub cells: u32,
@@ -75,6 +78,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eye_height: EYE,
         cells: Vec::new(),
         cell_size: args.cell,
+        cell_height: Some(args.cell_height),
         resolution: args.resolution,
         layers: Some(args.layers),
         near_field: None,
@@ -90,7 +94,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
 
     // From the corner of the first cell, looking down the avenue.
-    let corner = DVec3::new(x0 + 0.01 * args.cell, EYE, half * 0.98);
+    let corner = DVec3::new(
+        x0 + 0.01 * args.cell,
+        EYE + 0.49 * args.cell_height,
+        half * 0.98,
+    );
     let fov_y = 2.0
         * ((OUT_FOV_X.to_radians() / 2.0).tan() * OUT_H as f64 / OUT_W as f64)
             .atan()

@@ -36,6 +36,9 @@ pub enum LayerTarget {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BakeParams {
     pub cell_size: f64,
+    /// Cell height (Y) when the cells are flat boxes rather than cubes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell_height: Option<f64>,
     /// Texels per face side (`Res`).
     pub resolution: u32,
     pub target: LayerTarget,

@@ -111,6 +111,8 @@ pub fn eval_directions(faces: &[crate::Face]) -> Vec<(String, DVec3)> {
 pub enum CellError {
     #[error("cell size must be a finite number > 0 (got {0})")]
     BadCellSize(f64),
+    #[error("cell height must be a finite number > 0 (got {0})")]
+    BadCellHeight(f64),
     #[error("region must be finite with min < max on every axis (got min {min:?}, max {max:?})")]
     BadRegion { min: [f64; 3], max: [f64; 3] },
     #[error("region needs {0} cells, more than the limit of {1}; use a larger cell size or a smaller region")]
@@ -124,21 +126,43 @@ pub enum CellError {
 /// The most cells a grid may have (a guard against absurd flags).
 pub const MAX_CELLS: u64 = 1_000_000;
 
-/// A regular grid of cubic cells of side `cell_size` covering `region`. The region is grown to whole
-/// cells symmetrically around its centre; along an axis whose extent is below one cell (e.g. the
-/// eye-height range of a ground-level walk) there is exactly one layer of cells centred on it.
+/// A regular grid of cells covering `region`: `cell_size` wide along X and Z, and `cell_height`
+/// tall along Y (cubic cells when it is `None`). The region is grown to whole cells symmetrically
+/// around its centre; along an axis whose extent is below one cell (e.g. the eye-height range of a
+/// ground-level walk) there is exactly one layer of cells centred on it. Flat cells (a height of
+/// the eye-height range, not the cell width) suit scenes walked on the ground: the viewer never
+/// leaves that height range, so fewer layers reach a given near field and no viewpoint of the cell
+/// lies underground.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CellGrid {
     pub origin: DVec3,
     pub cell_size: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cell_height: Option<f64>,
     pub counts: IVec3,
 }
 
 impl CellGrid {
+    /// Cubic cells.
     pub fn tile(region: Aabb, cell_size: f64) -> Result<CellGrid, CellError> {
+        CellGrid::tile_with_height(region, cell_size, None)
+    }
+
+    /// Cells `cell_size` wide and `cell_height` (default: `cell_size`) tall.
+    pub fn tile_with_height(
+        region: Aabb,
+        cell_size: f64,
+        cell_height: Option<f64>,
+    ) -> Result<CellGrid, CellError> {
         if !(cell_size.is_finite() && cell_size > 0.0) {
             return Err(CellError::BadCellSize(cell_size));
         }
+        if let Some(h) = cell_height {
+            if !(h.is_finite() && h > 0.0) {
+                return Err(CellError::BadCellHeight(h));
+            }
+        }
+        let step = DVec3::new(cell_size, cell_height.unwrap_or(cell_size), cell_size);
         let size = region.size();
         if !region.min.is_finite() || !region.max.is_finite() || size.min_element() < 0.0 {
             return Err(CellError::BadRegion {
@@ -146,18 +170,28 @@ impl CellGrid {
                 max: region.max.to_array(),
             });
         }
-        let n = (size / cell_size - 1e-9).ceil().max(DVec3::ONE);
+        let n = (size / step - 1e-9).ceil().max(DVec3::ONE);
         let total = n.x * n.y * n.z;
         if total > MAX_CELLS as f64 {
             return Err(CellError::TooManyCells(total as u64, MAX_CELLS));
         }
         let counts = n.as_ivec3();
-        let origin = region.center() - 0.5 * cell_size * n;
+        let origin = region.center() - 0.5 * step * n;
         Ok(CellGrid {
             origin,
             cell_size,
+            cell_height,
             counts,
         })
+    }
+
+    /// The size of one cell per axis.
+    pub fn step(&self) -> DVec3 {
+        DVec3::new(
+            self.cell_size,
+            self.cell_height.unwrap_or(self.cell_size),
+            self.cell_size,
+        )
     }
 
     pub fn len(&self) -> usize {
@@ -172,11 +206,11 @@ impl CellGrid {
         if index.cmplt(IVec3::ZERO).any() || index.cmpge(self.counts).any() {
             return None;
         }
-        let half = DVec3::splat(0.5 * self.cell_size);
+        let step = self.step();
         Some(ViewCell {
             index,
-            center: self.origin + (index.as_dvec3() + 0.5) * self.cell_size,
-            half,
+            center: self.origin + (index.as_dvec3() + 0.5) * step,
+            half: 0.5 * step,
         })
     }
 
@@ -197,7 +231,7 @@ impl CellGrid {
 
     /// The cell containing `p` (half-open on the upper side), if any.
     pub fn locate(&self, p: DVec3) -> Option<ViewCell> {
-        let f = ((p - self.origin) / self.cell_size).floor();
+        let f = ((p - self.origin) / self.step()).floor();
         if !f.is_finite() {
             return None;
         }
@@ -268,6 +302,24 @@ mod tests {
         assert_eq!(g.parse_id("2_0_0").unwrap(), cells[2]);
         assert!(g.parse_id("9_0_0").is_err());
         assert!(g.parse_id("a_b").is_err());
+    }
+
+    #[test]
+    fn flat_cells_tile_the_eye_height_range() {
+        let region = Aabb::new(DVec3::new(0.0, 1.2, 0.0), DVec3::new(30.0, 2.2, 10.0));
+        let g = CellGrid::tile_with_height(region, 10.0, Some(1.0)).unwrap();
+        assert_eq!(g.counts, IVec3::new(3, 1, 1));
+        let c = g.cells()[1];
+        assert!((c.center - DVec3::new(15.0, 1.7, 5.0)).length() < 1e-12);
+        assert_eq!(c.half, DVec3::new(5.0, 0.5, 5.0));
+        assert_eq!(g.locate(DVec3::new(12.0, 2.1, 3.0)), Some(c));
+        assert_eq!(g.locate(DVec3::new(12.0, 2.3, 3.0)), None);
+        assert!(CellGrid::tile_with_height(region, 10.0, Some(0.0)).is_err());
+        // a cubic grid serialises without the field (manifests of cubic bakes are unchanged)
+        let cubic = CellGrid::tile(region, 10.0).unwrap();
+        assert!(!serde_json::to_string(&cubic)
+            .unwrap()
+            .contains("cell_height"));
     }
 
     #[test]

@@ -40,6 +40,7 @@ fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Eval
     let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
     let params = BakeParams {
         cell_size: 10.0,
+        cell_height: None,
         resolution: 256,
         target: LayerTarget::Layers(24),
         faces: Face::HORIZONTAL.to_vec(),
