@@ -185,20 +185,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     let view = cam.view();
-    let mut times = Vec::new();
-    let mut frame = None;
-    for _ in 0..args.frames {
-        let t = Instant::now();
-        frame = Some(
-            renderer
-                .render(&gpu_scene, &view, &options)
-                .context("rendering")?,
-        );
-        times.push(t.elapsed().as_secs_f64());
-    }
-    let frame = frame.context("no frame rendered")?;
-    times.sort_by(f64::total_cmp);
-    let render_seconds = times[times.len() / 2];
+    let (frame, render_seconds) = render_timed(args.frames, || {
+        renderer
+            .render(&gpu_scene, &view, &options)
+            .context("rendering")
+    })?;
     save_rgba(&frame, &args.output)?;
     if let Some(d) = &args.depth {
         save_depth(&frame, d)?;
@@ -304,20 +295,11 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         ..Default::default()
     };
     let view = cam.view();
-    let mut times = Vec::new();
-    let mut frame = None;
-    for _ in 0..args.frames {
-        let t = Instant::now();
-        frame = Some(
-            renderer
-                .render(&impostor_cell, &view, &options)
-                .context("rendering the impostor view")?,
-        );
-        times.push(t.elapsed().as_secs_f64());
-    }
-    let frame = frame.context("no frame rendered")?;
-    times.sort_by(f64::total_cmp);
-    let render_seconds = times[times.len() / 2];
+    let (frame, render_seconds) = render_timed(args.frames, || {
+        renderer
+            .render(&impostor_cell, &view, &options)
+            .context("rendering the impostor view")
+    })?;
     let mut comparison = None;
     if args.compare {
         let gpu_scene = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
@@ -406,6 +388,23 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         }
     );
     Ok(())
+}
+
+/// Renders `frames` times; returns the last frame and the median time in seconds.
+fn render_timed(
+    frames: u32,
+    mut render: impl FnMut() -> anyhow::Result<Frame>,
+) -> anyhow::Result<(Frame, f64)> {
+    let mut times = Vec::new();
+    let mut frame = None;
+    for _ in 0..frames.max(1) {
+        let t = Instant::now();
+        frame = Some(render()?);
+        times.push(t.elapsed().as_secs_f64());
+    }
+    let frame = frame.context("no frame rendered")?;
+    times.sort_by(f64::total_cmp);
+    Ok((frame, times[times.len() / 2]))
 }
 
 /// A reference/impostor comparison: the side-by-side image and its numbers.
