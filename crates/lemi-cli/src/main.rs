@@ -8,7 +8,9 @@ mod cmd_eval;
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
+mod cmd_walk;
 mod load;
+mod walk;
 
 use clap::{Parser, Subcommand};
 
@@ -32,6 +34,8 @@ enum Command {
     Info(cmd_info::Args),
     /// Render a scene with the reference renderer, or a bundle's impostor view (`--compare`: side by side).
     Render(cmd_render::Args),
+    /// Replay a camera path through a bundle: streaming impostors vs. all geometry, frame times.
+    Walk(cmd_walk::Args),
     /// Compute the layer placement of a view cell (the error metric).
     Layers(cmd_layers::Args),
 }
@@ -45,6 +49,7 @@ fn main() {
         Command::Eval(a) => cmd_eval::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),
+        Command::Walk(a) => cmd_walk::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", error_chain(&e));

@@ -303,3 +303,99 @@ fn bake_rejects_absurd_flags_by_name() {
     }
     assert_clean_error(&lemi(&["bake", "--merge", o]), "shard");
 }
+
+/// `lemi walk --auto`: streams the cells along a generated path, replays it with all geometry and
+/// writes the records, the summary and the plot; bad paths are clear errors.
+#[test]
+fn walk_auto_writes_records_summary_and_plot() {
+    let d = tmp("walk");
+    let bundle = d.join("bundle");
+    let b = bundle.to_str().unwrap();
+    let o = lemi(&[
+        "bake",
+        "builtin:city:20k:3",
+        "--region",
+        "15,1.7,-5,35,1.7,5",
+        "--cell-size",
+        "10",
+        "--cell-height",
+        "1",
+        "--resolution",
+        "32",
+        "--layers",
+        "4",
+        "--alpha-deg",
+        "0.5",
+        "-o",
+        b,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = d.join("walk");
+    let o = lemi(&[
+        "walk",
+        b,
+        "--auto",
+        "--walk-speed",
+        "10",
+        "--fly-speed",
+        "20",
+        "--fps",
+        "15",
+        "--size",
+        "64x36",
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in [
+        "frames",
+        "stalls",
+        "cell_switches",
+        "impostor_median_ms",
+        "impostor_p99_ms",
+        "geometry_median_ms",
+        "geometry_p99_ms",
+        "speedup_median",
+    ] {
+        assert!(!v[key].is_null(), "{key} missing: {v}");
+    }
+    assert!(v["frames"].as_u64().unwrap() > 10);
+    assert!(v["cell_switches"].as_u64().unwrap() >= 1, "{v}");
+    assert_eq!(v["stalls"], 0, "{v}");
+    for f in ["frames.csv", "summary.json", "plot.png", "path.json"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    assert!(csv.lines().count() > 2 * 10, "impostor and geometry rows");
+    // the written path replays
+    let o = lemi(&[
+        "walk",
+        b,
+        "--path",
+        out.join("path.json").to_str().unwrap(),
+        "--size",
+        "32x18",
+        "--no-geometry",
+        "-o",
+        d.join("walk2").to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // bad input
+    assert_clean_error(
+        &lemi(&["walk", b, "--path", "/nonexistent/p.json"]),
+        "p.json",
+    );
+    let bad = d.join("bad.json");
+    std::fs::write(
+        &bad,
+        b"{\"format\": \"lemi-path\", \"version\": 1, \"fps\": 30, \"keys\": []}",
+    )
+    .unwrap();
+    assert_clean_error(
+        &lemi(&["walk", b, "--path", bad.to_str().unwrap()]),
+        "bad.json",
+    );
+    assert_clean_error(&lemi(&["walk", b]), "--auto");
+}

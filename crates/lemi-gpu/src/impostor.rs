@@ -850,6 +850,400 @@ impl ImpostorRenderer {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Incremental upload, for the streaming runtime (GI 2002 sec. 3, runtime step 2: "to amortize the
+// cost of texture downloads over several frames, prefetched impostor textures are downloaded to
+// texture memory in smaller chunks").
+
+/// A cell's impostor data checked and laid out for the GPU, on the CPU only (no GPU work, `Send`):
+/// the near geometry copied out of the scene, the quads' vertex and index arrays and draw calls,
+/// and the decoded macro-textures. Built by [`ImpostorCellData::prepare`], typically on a
+/// background thread; uploaded with [`ImpostorCell::begin_upload`] and
+/// [`PendingImpostorCell::upload_step`].
+pub struct ImpostorCellData {
+    near_meshes: Vec<Mesh>,
+    geometry: QuadGeometry,
+    macros: Vec<MacroTexture>,
+    quad_count: usize,
+}
+
+impl ImpostorCellData {
+    /// Checks and lays out a cell's data exactly as [`ImpostorCell::upload`] does (same errors,
+    /// same order of checks), except the adapter's limits, which [`ImpostorCell::begin_upload`]
+    /// checks.
+    pub fn prepare(
+        scene: &Scene,
+        near: &[[u32; 2]],
+        quads: &[Quad],
+        macros: Vec<MacroTexture>,
+    ) -> Result<ImpostorCellData, GpuError> {
+        let near_meshes = near_meshes(scene, near)?;
+        for (i, m) in macros.iter().enumerate() {
+            let expected = m.width as u64 * m.height as u64 * 4;
+            if m.width == 0 || m.height == 0 || m.rgba.len() as u64 != expected {
+                return Err(GpuError::Invalid(format!(
+                    "macro-texture {i} is {}x{} but has {} bytes of RGBA8 data (expected {expected})",
+                    m.width,
+                    m.height,
+                    m.rgba.len()
+                )));
+            }
+        }
+        let geometry = quad_geometry(quads, &macros)?;
+        Ok(ImpostorCellData {
+            near_meshes,
+            geometry,
+            macros,
+            quad_count: quads.len(),
+        })
+    }
+
+    pub fn quad_count(&self) -> usize {
+        self.quad_count
+    }
+
+    /// Triangles of the near geometry.
+    pub fn near_triangles(&self) -> u64 {
+        self.near_meshes
+            .iter()
+            .map(|m| m.indices.len() as u64 / 3)
+            .sum()
+    }
+
+    /// Bytes of macro-texture data (RGBA8), what the GPU will hold as textures.
+    pub fn texture_bytes(&self) -> u64 {
+        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+    }
+
+    /// Bytes of vertex and index data (near geometry and quads), uploaded by
+    /// [`ImpostorCell::begin_upload`] in one go.
+    pub fn geometry_bytes(&self) -> u64 {
+        let near: u64 = self
+            .near_meshes
+            .iter()
+            .map(|m| {
+                std::mem::size_of_val(m.vertices.as_slice()) as u64
+                    + std::mem::size_of_val(m.indices.as_slice()) as u64
+            })
+            .sum();
+        near + std::mem::size_of_val(self.geometry.vertices.as_slice()) as u64
+            + std::mem::size_of_val(self.geometry.indices.as_slice()) as u64
+    }
+
+    /// Bytes this value holds in main memory (texture plus geometry data; small bookkeeping not
+    /// counted).
+    pub fn cpu_bytes(&self) -> u64 {
+        self.texture_bytes() + self.geometry_bytes()
+    }
+
+    /// The largest macro-texture's bytes (how much [`PendingImpostorCell`] may hold twice, on the
+    /// CPU and the GPU, while it uploads).
+    pub fn largest_texture_bytes(&self) -> u64 {
+        self.macros
+            .iter()
+            .map(|m| m.rgba.len() as u64)
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+/// A cell whose upload is in progress: the geometry is on the GPU, the macro-textures are written
+/// row by row by [`PendingImpostorCell::upload_step`]. It cannot be drawn (there is no way to hand
+/// it to [`ImpostorRenderer`]); [`PendingImpostorCell::finish`] turns a complete one into an
+/// [`ImpostorCell`].
+///
+/// A macro-texture's GPU texture is created when its first rows are written and its CPU copy is
+/// freed when its last row is, so a cell in transit holds at most one macro-texture twice.
+pub struct PendingImpostorCell {
+    near: GpuScene,
+    quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// One bind group per macro-texture begun so far, in order.
+    macro_groups: Vec<wgpu::BindGroup>,
+    /// The texture being written (the last one of `macro_groups`), until it is complete.
+    current: Option<wgpu::Texture>,
+    /// CPU copies; a completed macro-texture's `rgba` is emptied.
+    macros: Vec<MacroTexture>,
+    draws: Vec<MacroDraw>,
+    quad_count: usize,
+    texture_bytes: u64,
+    geometry_bytes: u64,
+    /// Next macro-texture and row to write.
+    next_macro: usize,
+    next_row: u32,
+    uploaded: u64,
+}
+
+impl ImpostorCell {
+    /// Starts an incremental upload: checks the adapter's limits (macro-textures larger than its
+    /// textures, quad arrays larger than its buffers are [`GpuError::Limit`]), uploads the near
+    /// geometry and the quads' vertex and index buffers (in one go) and returns the cell with no
+    /// macro-texture written yet. Then call [`PendingImpostorCell::upload_step`] until it reports
+    /// completion and [`PendingImpostorCell::finish`]. The result draws exactly like
+    /// [`ImpostorCell::upload`]'s.
+    pub fn begin_upload(
+        gpu: &Gpu,
+        materials: Arc<GpuMaterials>,
+        data: ImpostorCellData,
+    ) -> Result<PendingImpostorCell, GpuError> {
+        let limits = gpu.limits();
+        let max_dim = limits.max_texture_dimension_2d;
+        for (i, m) in data.macros.iter().enumerate() {
+            if m.width > max_dim || m.height > max_dim {
+                return Err(GpuError::Limit(format!(
+                    "macro-texture {i} is {}x{}, larger than this adapter's textures ({max_dim} per side)",
+                    m.width, m.height
+                )));
+            }
+        }
+        let texture_bytes = data.texture_bytes();
+        let ImpostorCellData {
+            near_meshes,
+            geometry:
+                QuadGeometry {
+                    vertices,
+                    indices,
+                    draws,
+                },
+            macros,
+            quad_count,
+        } = data;
+        let vertex_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
+        let index_bytes = std::mem::size_of_val(indices.as_slice()) as u64;
+        if vertex_bytes.max(index_bytes) > limits.max_buffer_size {
+            return Err(GpuError::Limit(format!(
+                "{quad_count} quads need a {} byte buffer, more than this adapter's {} bytes",
+                vertex_bytes.max(index_bytes),
+                limits.max_buffer_size
+            )));
+        }
+        let geometry = GpuGeometry::upload(gpu, &near_meshes, &UploadOptions::default())?;
+        drop(near_meshes);
+        let near = GpuScene::from_parts(materials, geometry)?;
+        let (quad_buffers, layout, sampler) = gpu.scoped("uploading impostor quads", || {
+            let device = &gpu.device;
+            let quad_buffers = (!indices.is_empty()).then(|| {
+                let v = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad vertices"),
+                    contents: bytemuck::cast_slice(&vertices),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+                let i = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad indices"),
+                    contents: bytemuck::cast_slice(&indices),
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+                (v, i)
+            });
+            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("lemi macro-texture sampler"),
+                address_mode_u: wgpu::AddressMode::ClampToEdge,
+                address_mode_v: wgpu::AddressMode::ClampToEdge,
+                address_mode_w: wgpu::AddressMode::ClampToEdge,
+                mag_filter: wgpu::FilterMode::Nearest,
+                min_filter: wgpu::FilterMode::Nearest,
+                mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+                ..Default::default()
+            });
+            (quad_buffers, macro_layout(device), sampler)
+        })?;
+        let geometry_bytes = buffer_bytes(&quad_buffers, &near);
+        Ok(PendingImpostorCell {
+            near,
+            quad_buffers,
+            layout,
+            sampler,
+            macro_groups: Vec::with_capacity(macros.len()),
+            current: None,
+            macros,
+            draws,
+            quad_count,
+            texture_bytes,
+            geometry_bytes,
+            next_macro: 0,
+            next_row: 0,
+            uploaded: 0,
+        })
+    }
+
+    /// Bytes this cell holds on the GPU: macro-textures plus vertex and index buffers.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.texture_bytes + buffer_bytes(&self.quad_buffers, &self.near)
+    }
+}
+
+/// Bytes of a cell's vertex and index buffers (quads and near geometry) as allocated.
+fn buffer_bytes(quad_buffers: &Option<(wgpu::Buffer, wgpu::Buffer)>, near: &GpuScene) -> u64 {
+    let quads = quad_buffers
+        .as_ref()
+        .map_or(0, |(v, i)| v.size() + i.size());
+    let near: u64 = near
+        .geometry
+        .chunks()
+        .iter()
+        .map(|c| c.vertices.size() + c.indices.size())
+        .sum();
+    quads + near
+}
+
+impl PendingImpostorCell {
+    /// Writes up to `max_bytes` of macro-texture rows (with `queue.write_texture`, whole rows, in
+    /// the cell's macro-texture order; at least one row per call, so a budget below one row still
+    /// progresses) and returns whether every macro-texture is now complete. The writes are queued
+    /// and reach the GPU with the next submission, before any later draw.
+    pub fn upload_step(&mut self, gpu: &Gpu, max_bytes: u64) -> Result<bool, GpuError> {
+        if self.is_complete() {
+            return Ok(true);
+        }
+        gpu.scoped("uploading macro-texture rows", || {
+            let mut written = 0u64;
+            while let Some(m) = self.macros.get(self.next_macro) {
+                let row_bytes = 4 * m.width as u64;
+                let rows_left = m.height - self.next_row;
+                let fit = (max_bytes.saturating_sub(written) / row_bytes).min(rows_left as u64);
+                let rows = if written == 0 { fit.max(1) } else { fit } as u32;
+                if rows == 0 {
+                    break;
+                }
+                if self.current.is_none() {
+                    let label = format!("lemi macro-texture {}", self.next_macro);
+                    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+                        label: Some(&label),
+                        size: wgpu::Extent3d {
+                            width: m.width,
+                            height: m.height,
+                            depth_or_array_layers: 1,
+                        },
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                        view_formats: &[],
+                    });
+                    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+                    self.macro_groups.push(gpu.device.create_bind_group(
+                        &wgpu::BindGroupDescriptor {
+                            label: Some(&label),
+                            layout: &self.layout,
+                            entries: &[
+                                wgpu::BindGroupEntry {
+                                    binding: 3,
+                                    resource: wgpu::BindingResource::TextureView(&view),
+                                },
+                                wgpu::BindGroupEntry {
+                                    binding: 4,
+                                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                                },
+                            ],
+                        },
+                    ));
+                    self.current = Some(texture);
+                }
+                let Some(texture) = self.current.as_ref() else {
+                    break;
+                };
+                let start = (self.next_row as u64 * row_bytes) as usize;
+                let end = start + (rows as u64 * row_bytes) as usize;
+                gpu.queue.write_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d {
+                            x: 0,
+                            y: self.next_row,
+                            z: 0,
+                        },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    &m.rgba[start..end],
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(4 * m.width),
+                        rows_per_image: Some(rows),
+                    },
+                    wgpu::Extent3d {
+                        width: m.width,
+                        height: rows,
+                        depth_or_array_layers: 1,
+                    },
+                );
+                written += rows as u64 * row_bytes;
+                self.uploaded += rows as u64 * row_bytes;
+                self.next_row += rows;
+                if self.next_row == m.height {
+                    // Complete: the GPU texture stays alive through its bind group.
+                    self.macros[self.next_macro].rgba = Vec::new();
+                    self.current = None;
+                    self.next_macro += 1;
+                    self.next_row = 0;
+                }
+            }
+        })?;
+        Ok(self.is_complete())
+    }
+
+    /// Whether every macro-texture has been written.
+    pub fn is_complete(&self) -> bool {
+        self.next_macro >= self.macros.len()
+    }
+
+    /// Macro-texture bytes written so far.
+    pub fn uploaded_bytes(&self) -> u64 {
+        self.uploaded
+    }
+
+    /// Macro-texture bytes still to write.
+    pub fn remaining_bytes(&self) -> u64 {
+        self.texture_bytes - self.uploaded
+    }
+
+    /// Bytes of macro-texture data of the whole cell.
+    pub fn texture_bytes(&self) -> u64 {
+        self.texture_bytes
+    }
+
+    /// Bytes of the vertex and index buffers [`ImpostorCell::begin_upload`] created and filled.
+    pub fn geometry_bytes(&self) -> u64 {
+        self.geometry_bytes
+    }
+
+    /// Bytes held on the GPU so far: geometry buffers plus the macro-textures created so far.
+    pub fn gpu_bytes(&self) -> u64 {
+        let textures: u64 = self
+            .macros
+            .iter()
+            .take(self.macro_groups.len())
+            .map(|m| 4 * m.width as u64 * m.height as u64)
+            .sum();
+        self.geometry_bytes + textures
+    }
+
+    /// Bytes of macro-texture data still held in main memory.
+    pub fn cpu_bytes(&self) -> u64 {
+        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+    }
+
+    /// The drawable cell; [`GpuError::Invalid`] if some macro-texture is not completely written.
+    pub fn finish(self) -> Result<ImpostorCell, GpuError> {
+        if !self.is_complete() || self.macro_groups.len() != self.macros.len() {
+            return Err(GpuError::Invalid(format!(
+                "the cell's upload is incomplete: {} of {} macro-texture bytes written",
+                self.uploaded, self.texture_bytes
+            )));
+        }
+        Ok(ImpostorCell {
+            near: self.near,
+            quad_buffers: self.quad_buffers,
+            macro_groups: self.macro_groups,
+            draws: self.draws,
+            quad_count: self.quad_count,
+            texture_bytes: self.texture_bytes,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -928,5 +1322,194 @@ mod tests {
             assert!(matches!(r, Err(GpuError::Invalid(_))), "{rect:?}");
         }
         assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros).is_ok());
+    }
+}
+
+#[cfg(test)]
+mod incremental_tests {
+    //! The incremental upload ([`ImpostorCell::begin_upload`] + [`PendingImpostorCell`]) against
+    //! the one-shot [`ImpostorCell::upload`], on whatever adapter wgpu finds. Without an adapter
+    //! the test fails with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
+    use super::*;
+    use crate::BackendChoice;
+    use lemi_core::camera::Camera;
+    use lemi_core::{Face, Material, SceneBuilder, Vertex};
+
+    fn gpu() -> Option<Gpu> {
+        match Gpu::new(BackendChoice::Auto) {
+            Ok(g) => Some(g),
+            Err(e) => {
+                if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
+                    eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
+                    None
+                } else {
+                    panic!("{e}");
+                }
+            }
+        }
+    }
+
+    /// A quad facing a camera at the origin looking along −Z, at depth `z`.
+    fn quad(macro_index: u32, rect: [u32; 4], [x0, x1, y0, y1, z]: [f32; 5]) -> Quad {
+        Quad {
+            face: Face::NegZ,
+            layer: 0,
+            texels: [0, 0, rect[2] as u16, rect[3] as u16],
+            corners: [[x0, y1, z], [x1, y1, z], [x1, y0, z], [x0, y0, z]],
+            macro_index,
+            rect,
+            rotated: false,
+        }
+    }
+
+    /// A `w × h` macro-texture of distinct opaque colours (seeded by `k`), every 7th texel clear.
+    fn pattern(w: u32, h: u32, k: u32) -> MacroTexture {
+        let mut rgba = Vec::with_capacity((4 * w * h) as usize);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let a = if (i + k) % 7 == 0 { 0 } else { 255 };
+                rgba.extend_from_slice(&[
+                    (x * 37 + k * 11) as u8,
+                    (y * 23 + k * 5) as u8,
+                    (i * 13 + k) as u8,
+                    a,
+                ]);
+            }
+        }
+        MacroTexture {
+            width: w,
+            height: h,
+            rgba,
+        }
+    }
+
+    fn scene() -> Scene {
+        let mut b = SceneBuilder::new();
+        b.add_material(Material::default());
+        let v = |p: [f32; 3]| Vertex::new(p, [0.0, 0.0, 1.0], [0.0, 0.0], [200, 180, 90, 255]);
+        b.add_mesh(Mesh {
+            material: 0,
+            vertices: vec![
+                v([-0.5, -0.5, -2.0]),
+                v([0.5, -0.5, -2.0]),
+                v([0.0, 0.4, -2.0]),
+            ],
+            indices: vec![0, 1, 2],
+        });
+        b.finish()
+    }
+
+    #[test]
+    fn incremental_upload_renders_like_the_one_shot_upload() {
+        let Some(gpu) = gpu() else { return };
+        let scene = scene();
+        let materials =
+            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+        // Three macro-textures of different widths (rows of 52, 128 and 36 bytes).
+        let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1), pattern(9, 21, 2)];
+        let quads = [
+            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
+            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
+            quad(2, [0, 0, 9, 21], [0.5, 3.5, 0.5, 4.0, -5.5]),
+            quad(1, [4, 4, 8, 8], [-1.0, 1.0, -1.0, 1.0, -7.0]),
+        ];
+        let near = [[0u32, 0u32]];
+        let total: u64 = macros.iter().map(|m| m.rgba.len() as u64).sum();
+        let one_shot =
+            ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &macros)
+                .expect("one-shot upload");
+        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        let view = Camera::new(
+            glam::DVec3::ZERO,
+            -glam::DVec3::Z,
+            glam::DVec3::Y,
+            90.0,
+            64,
+            64,
+        )
+        .expect("camera")
+        .view();
+        let opts = RenderOptions::default();
+        let want = r.render(&one_shot, &view, &opts).expect("render one-shot");
+        assert!(want.covered_count() > 1000, "{}", want.covered_count());
+        for budget in [0u64, 1, 100, 200, 1000, u64::MAX] {
+            let data =
+                ImpostorCellData::prepare(&scene, &near, &quads, macros.clone()).expect("prepare");
+            assert_eq!(data.texture_bytes(), total);
+            assert_eq!(data.quad_count(), 4);
+            assert_eq!(data.near_triangles(), 1);
+            let mut pending =
+                ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+            assert_eq!(pending.texture_bytes(), total);
+            assert_eq!(pending.geometry_bytes() + total, one_shot.gpu_bytes());
+            assert!(!pending.is_complete());
+            let mut steps = 0;
+            loop {
+                let before = pending.uploaded_bytes();
+                let done = pending.upload_step(&gpu, budget).expect("upload step");
+                let step = pending.uploaded_bytes() - before;
+                // at most the budget, or one row (128 bytes at most here) when below it
+                assert!(step > 0, "a step always progresses");
+                assert!(
+                    step <= budget.max(128),
+                    "step of {step} bytes, budget {budget}"
+                );
+                steps += 1;
+                assert_eq!(pending.uploaded_bytes() + pending.remaining_bytes(), total);
+                if done {
+                    break;
+                }
+                assert!(steps < 10_000);
+            }
+            assert_eq!(pending.uploaded_bytes(), total);
+            assert_eq!(pending.cpu_bytes(), 0, "CPU copies are freed once uploaded");
+            if budget == u64::MAX {
+                assert_eq!(steps, 1);
+            } else if budget >= 128 {
+                assert!(steps as u64 >= total / budget, "{steps} steps");
+            }
+            let cell = pending.finish().expect("finish");
+            assert_eq!(cell.texture_bytes(), one_shot.texture_bytes());
+            assert_eq!(cell.gpu_bytes(), one_shot.gpu_bytes());
+            assert_eq!(cell.quad_draw_calls(), one_shot.quad_draw_calls());
+            let got = r.render(&cell, &view, &opts).expect("render incremental");
+            assert!(
+                got == want,
+                "budget {budget}: the incremental upload renders differently"
+            );
+        }
+        // An incomplete cell cannot be finished.
+        let data = ImpostorCellData::prepare(&scene, &near, &quads, macros.clone()).expect("prep");
+        let mut pending = ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+        pending.upload_step(&gpu, 300).expect("step");
+        match pending.finish() {
+            Err(GpuError::Invalid(m)) => assert!(m.contains("incomplete"), "{m}"),
+            Err(e) => panic!("expected Invalid, got {e}"),
+            Ok(_) => panic!("an incomplete upload finished"),
+        }
+        // A cell without macro-textures is complete at once.
+        let data = ImpostorCellData::prepare(&scene, &near, &[], Vec::new()).expect("prep");
+        let pending = ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+        assert!(pending.is_complete());
+        assert_eq!(pending.finish().expect("finish").near_triangles(), 1);
+        // prepare checks like upload does.
+        let short = MacroTexture {
+            width: 4,
+            height: 4,
+            rgba: vec![0; 3],
+        };
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &near, &[], vec![short]),
+            Err(GpuError::Invalid(_))
+        ));
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &[[3, 0]], &[], Vec::new()),
+            Err(GpuError::Invalid(_))
+        ));
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &[], &quads, Vec::new()),
+            Err(GpuError::Invalid(_))
+        ));
     }
 }

@@ -30,7 +30,9 @@ pub mod shading;
 pub mod texture;
 
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
-pub use impostor::{ImpostorCell, ImpostorRenderer, QUAD_ALPHA_CUTOFF};
+pub use impostor::{
+    ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, QUAD_ALPHA_CUTOFF,
+};
 pub use recorder::{LayerFrame, LayerRecorder, MaterialRun};
 pub use renderer::{
     padded_bytes_per_row, Frame, RenderOptions, Renderer, COLOR_FORMAT, DEPTH_FORMAT,

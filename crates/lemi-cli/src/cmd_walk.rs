@@ -1,0 +1,386 @@
+//! `lemi walk BUNDLE (--auto | --path P)`: headless replay of a camera path through a baked region
+//! (GI 2002 sec. 3 and 6, Figs. 8-9). The runtime streams cells ahead of the viewer
+//! (`lemi-runtime`: prediction, background loading, LRU cache, uploads under a per-frame budget)
+//! and draws the current cell's near geometry plus its impostors; the same path is then replayed
+//! drawing all geometry. Writes `frames.csv`, `summary.json` and `plot.png` (frame rate and
+//! primitives per frame, cell changes and stalls marked).
+//!
+//! The replay is paced in real time: a frame that finishes before its time on the path waits, so
+//! the background loader gets exactly the time a real walk would give it. When frames take longer
+//! than the path's frame interval (software rendering at high resolution), the loader gets more
+//! time than in real time; the summary says so (`slower_than_real_time_frames`).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use lemi_core::camera::View;
+use lemi_gpu::{
+    BackendChoice, Gpu, GpuMaterials, GpuScene, ImpostorRenderer, RenderOptions, Renderer,
+    UploadOptions,
+};
+use lemi_runtime::{StallPolicy, Streamer, StreamerOptions};
+
+use crate::walk::{auto_path, write_csv, write_plot, CameraPath, FrameRecord, Mode, Summary};
+
+/// Replay a camera path with streaming impostors and with all geometry; frame times, plots.
+#[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("path_source").required(true).args(["auto", "path"])))]
+pub struct Args {
+    /// The bundle directory.
+    pub bundle: PathBuf,
+    /// Generate a walkthrough of every baked cell plus a flyover inside the baked region.
+    #[arg(long)]
+    pub auto: bool,
+    /// Replay this camera path (`lemi-path` JSON, as `lemi view` records it).
+    #[arg(long, value_name = "PATH.json")]
+    pub path: Option<PathBuf>,
+    /// Output size `WIDTHxHEIGHT`.
+    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    pub size: (u32, u32),
+    /// Horizontal field of view in degrees; default: the bake's output view (60° without one).
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// Walking speed of `--auto` (m/s).
+    #[arg(long, default_value_t = 1.4)]
+    pub walk_speed: f64,
+    /// Flying speed of `--auto` (m/s).
+    #[arg(long, default_value_t = 10.0)]
+    pub fly_speed: f64,
+    /// Frames per second of `--auto`.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Output directory (frames.csv, summary.json, plot.png, path.json); default BUNDLE/walk.
+    #[arg(short = 'o', long = "out")]
+    pub out: Option<PathBuf>,
+    /// Also write every Nth impostor frame as PNG into this directory.
+    #[arg(long)]
+    pub frames_dir: Option<PathBuf>,
+    /// With --frames-dir: write every Nth frame.
+    #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..))]
+    pub every: u64,
+    /// Skip the all-geometry replay.
+    #[arg(long)]
+    pub no_geometry: bool,
+    /// Cell cache budget in MiB (CPU + GPU bytes of streamed cells).
+    #[arg(long, default_value_t = 512)]
+    pub cache_mb: u64,
+    /// Texture upload budget per frame in KiB.
+    #[arg(long, default_value_t = 8192)]
+    pub upload_kb: u64,
+    /// Highest observer speed the prefetching plans for (m/s).
+    #[arg(long, default_value_t = 12.0)]
+    pub max_speed: f64,
+    /// When the current cell is not ready: wait for it (block) or draw all geometry for that
+    /// frame (fallback). Both count a stall.
+    #[arg(long, value_enum, default_value = "block")]
+    pub stall: StallArg,
+    /// The scene, if it moved since the bake (checked against the bundle's fingerprint).
+    #[arg(long = "scene", value_name = "SCENE")]
+    pub scene_override: Vec<String>,
+    /// GPU backend: auto, vulkan or gl.
+    #[arg(long, default_value = "auto")]
+    pub backend: String,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum StallArg {
+    Block,
+    Fallback,
+}
+
+fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}`: height: {e}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("`{s}`: width and height must be 1..=16384"));
+    }
+    Ok((w, h))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    for (flag, v) in [
+        ("--walk-speed", args.walk_speed),
+        ("--fly-speed", args.fly_speed),
+        ("--max-speed", args.max_speed),
+        ("--fps", args.fps),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            bail!("{flag} must be a positive number (got {v})");
+        }
+    }
+    if let Some(f) = args.fov {
+        if !(f.is_finite() && f > 0.0 && f < 180.0) {
+            bail!("--fov must be in (0, 180) degrees (got {f})");
+        }
+    }
+    let (manifest, scene) =
+        crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let baked: Vec<_> = manifest
+        .cells
+        .iter()
+        .filter_map(|c| manifest.grid.parse_id(&c.id).ok())
+        .collect();
+    let path = match &args.path {
+        Some(p) => CameraPath::read(p)?,
+        None => auto_path(
+            &manifest.grid,
+            &baked,
+            args.walk_speed,
+            args.fly_speed,
+            args.fps,
+        )
+        .context("--auto")?,
+    };
+    let out = args.out.clone().unwrap_or_else(|| args.bundle.join("walk"));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    if let Some(d) = &args.frames_dir {
+        std::fs::create_dir_all(d)
+            .with_context(|| format!("creating --frames-dir {}", d.display()))?;
+    }
+    path.write(&out.join("path.json"))?;
+
+    let (w, h) = args.size;
+    let fov_x = args.fov.or(manifest.params.output_fov_deg).unwrap_or(60.0);
+    let fov_y = 2.0
+        * ((0.5 * fov_x.to_radians()).tan() * h as f64 / w as f64)
+            .atan()
+            .to_degrees();
+    let gpu = Arc::new(Gpu::new(backend)?);
+    let scene = Arc::new(scene);
+    let materials = Arc::new(
+        GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
+            .context("uploading the scene's materials")?,
+    );
+    let options = StreamerOptions {
+        cache_budget_bytes: args.cache_mb.saturating_mul(1 << 20),
+        upload_budget_bytes_per_frame: args.upload_kb.saturating_mul(1 << 10),
+        max_speed: args.max_speed,
+        stall_policy: match args.stall {
+            StallArg::Block => StallPolicy::Block,
+            StallArg::Fallback => StallPolicy::Fallback,
+        },
+        ..Default::default()
+    };
+    let mut streamer = Streamer::new(
+        gpu.clone(),
+        manifest.clone(),
+        &args.bundle,
+        scene.clone(),
+        materials.clone(),
+        options,
+    )?;
+    let impostor_renderer = ImpostorRenderer::new(&gpu)?;
+    let renderer = Renderer::new(&gpu)?;
+    let render_options = RenderOptions {
+        clear: [150, 190, 235, 255],
+        ..Default::default()
+    };
+    // All geometry: for the comparison replay and for fallback frames.
+    let full = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
+        .context("uploading the scene for the geometry replay")?;
+    let total_triangles = scene.triangle_count();
+    let frames: Vec<_> = path.frames().collect();
+    let n = frames.len() as u64;
+    let bar = if args.json {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(n * if args.no_geometry { 1 } else { 2 })
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} frames  {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    if let Some((_, _, first)) = frames.first() {
+        bar.set_message("preloading the first cells");
+        streamer
+            .preload(first.eye, first.velocity, Duration::from_secs(60))
+            .context("preloading the first cells")?;
+    }
+    let dt = 1.0 / path.fps;
+    let mut impostor = Vec::with_capacity(frames.len());
+    let mut warnings = Vec::new();
+    let mut slow_frames = 0u64;
+    let mut last_cell: Option<String> = None;
+    let start = Instant::now();
+    let t0 = frames.first().map(|f| f.1).unwrap_or(0.0);
+    for (index, t, pose) in &frames {
+        // real-time pacing: this frame starts at its time on the path
+        let due = Duration::from_secs_f64((t - t0).max(0.0));
+        match due.checked_sub(start.elapsed()) {
+            Some(wait) => std::thread::sleep(wait),
+            None if *index > 0 => slow_frames += 1,
+            None => {}
+        }
+        let view = camera_view(pose, fov_y, w, h)?;
+        let t_frame = Instant::now();
+        let state = streamer.frame(pose.eye, pose.velocity, dt);
+        warnings.extend(state.warnings.iter().cloned());
+        let cell = state.current_cell.clone();
+        let switch = *index > 0 && cell != last_cell;
+        last_cell = cell.clone();
+        let (frame, near, quads, fallback) = match state.ready {
+            Some(c) => (
+                impostor_renderer
+                    .render(c, &view, &render_options)
+                    .context("rendering an impostor frame")?,
+                c.near_triangles(),
+                c.quad_count() as u64,
+                false,
+            ),
+            None => (
+                renderer
+                    .render(&full, &view, &render_options)
+                    .context("rendering a fallback frame")?,
+                total_triangles,
+                0,
+                true,
+            ),
+        };
+        let record = FrameRecord {
+            frame: *index,
+            t: *t,
+            mode: Mode::Impostor,
+            cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
+            gpu_ms: None,
+            near_triangles: near,
+            impostor_quads: quads,
+            total_triangles: if fallback { total_triangles } else { near },
+            cell,
+            cell_switch: switch,
+            stalled: state.stalled,
+            cache_bytes: state.cache_bytes,
+            fallback,
+        };
+        if let Some(d) = &args.frames_dir {
+            if index % args.every == 0 {
+                let p = d.join(format!("frame-{index:06}.png"));
+                image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba)
+                    .context("frame has the wrong size")?
+                    .save(&p)
+                    .with_context(|| format!("writing {}", p.display()))?;
+            }
+        }
+        impostor.push(record);
+        bar.inc(1);
+        bar.set_message(format!(
+            "impostors, cell {}",
+            last_cell.as_deref().unwrap_or("-")
+        ));
+    }
+    let stream_stats = streamer.stats();
+    drop(streamer);
+    let mut geometry = Vec::new();
+    if !args.no_geometry {
+        for (index, t, pose) in &frames {
+            let view = camera_view(pose, fov_y, w, h)?;
+            let t_frame = Instant::now();
+            renderer
+                .render(&full, &view, &render_options)
+                .context("rendering a geometry frame")?;
+            geometry.push(FrameRecord {
+                frame: *index,
+                t: *t,
+                mode: Mode::Geometry,
+                cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
+                gpu_ms: None,
+                near_triangles: 0,
+                impostor_quads: 0,
+                total_triangles,
+                cell: manifest.grid.locate(pose.eye).map(|c| c.id()),
+                cell_switch: false,
+                stalled: false,
+                cache_bytes: 0,
+                fallback: false,
+            });
+            bar.inc(1);
+            bar.set_message("all geometry");
+        }
+    }
+    bar.finish_and_clear();
+    let mut all = impostor.clone();
+    all.extend(geometry.iter().cloned());
+    write_csv(&out.join("frames.csv"), &all)?;
+    let summary = Summary::of(&impostor, &geometry);
+    summary.write_json(&out.join("summary.json"))?;
+    write_plot(&out.join("plot.png"), &impostor, &geometry)?;
+    let mut v = serde_json::to_value(&summary)?;
+    v["slower_than_real_time_frames"] = serde_json::json!(slow_frames);
+    v["size"] = serde_json::json!([w, h]);
+    v["fov_x_deg"] = serde_json::json!(fov_x);
+    v["adapter"] = serde_json::json!(gpu.describe());
+    v["loads"] = serde_json::json!(stream_stats.loads);
+    v["evictions"] = serde_json::json!(stream_stats.evictions);
+    v["peak_cache_bytes"] = serde_json::json!(stream_stats.peak_cache_bytes);
+    v["warnings"] = serde_json::json!(warnings);
+    v["out"] = serde_json::json!(out);
+    let summary_path = out.join("summary.json");
+    lemi_core::container::write_atomic(&summary_path, &serde_json::to_vec_pretty(&v)?)
+        .with_context(|| format!("writing {}", summary_path.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let ms = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1} ms"));
+    println!("lemi walk");
+    println!("adapter    {}", gpu.describe());
+    println!(
+        "path       {} frames at {} fps ({:.1} s), {w}x{h}, {fov_x}° horizontal",
+        summary.frames,
+        path.fps,
+        path.duration()
+    );
+    println!(
+        "impostors  median {}, p99 {}; {} cell switches, {} stalls, {} loads, {} evictions, peak cache {:.1} MB",
+        ms(summary.impostor_median_ms),
+        ms(summary.impostor_p99_ms),
+        summary.cell_switches,
+        summary.stalls,
+        stream_stats.loads,
+        stream_stats.evictions,
+        stream_stats.peak_cache_bytes as f64 / 1e6
+    );
+    if !args.no_geometry {
+        println!(
+            "geometry   median {}, p99 {}; speed-up of the median {}",
+            ms(summary.geometry_median_ms),
+            ms(summary.geometry_p99_ms),
+            summary
+                .speedup_median
+                .map_or("-".to_string(), |s| format!("{s:.1}x"))
+        );
+    }
+    if slow_frames > 0 {
+        println!(
+            "note       {slow_frames} frames took longer than the path's frame interval: the loader had more time than in real time"
+        );
+    }
+    println!(
+        "wrote      {} (frames.csv, summary.json, plot.png, path.json)",
+        out.display()
+    );
+    Ok(())
+}
+
+fn camera_view(pose: &crate::walk::Pose, fov_y: f64, w: u32, h: u32) -> Result<View> {
+    Ok(pose
+        .camera(fov_y, w, h)
+        .context("a camera of the path")?
+        .view())
+}

@@ -1,0 +1,412 @@
+//! Per-frame records of a `lemi walk` replay, their CSV file, and the summary statistics (the
+//! numbers behind GI 2002 Figs. 8–9: frame times of the impostor and the all-geometry replay of
+//! the same path, primitives per frame, cell switches and stalls).
+//!
+//! # Frame time
+//! The statistics use [`FrameRecord::cpu_ms`], the wall-clock time of the whole frame on the CPU.
+//! The headless renderer reads every frame back, so that time includes the GPU's work on the frame
+//! (and the readback). [`FrameRecord::gpu_ms`] is the GPU time from timestamp queries when the
+//! caller has them (`None` otherwise); its medians are reported beside.
+//!
+//! # Percentiles
+//! Nearest rank: of `n` sorted values `x[1] ≤ … ≤ x[n]`, the p-th percentile is `x[⌈p/100 · n⌉]`
+//! (the first value for `p = 0`). The median is the 50th percentile, so of an even number of
+//! values it is the lower of the two middle ones. Non-finite times are left out of the statistics.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+
+/// Which renderer drew a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Near geometry plus the current cell's impostors.
+    Impostor,
+    /// All the scene's geometry (the comparison).
+    Geometry,
+}
+
+impl Mode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Impostor => "impostor",
+            Mode::Geometry => "geometry",
+        }
+    }
+}
+
+/// What one frame of a replay did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Frame index on the path.
+    pub frame: u64,
+    /// Path time (seconds).
+    pub t: f64,
+    pub mode: Mode,
+    /// Wall-clock time of the frame (ms), readback included (see the module doc).
+    pub cpu_ms: f64,
+    /// GPU time of the frame (ms) from timestamp queries, if available.
+    pub gpu_ms: Option<f64>,
+    /// Near-field triangles drawn (impostor mode; 0 in geometry mode).
+    pub near_triangles: u64,
+    /// Impostor quads drawn (impostor mode; 0 in geometry mode).
+    pub impostor_quads: u64,
+    /// Triangles submitted in the frame: near triangles + 2 per quad in impostor mode, every
+    /// triangle of the scene in geometry mode.
+    pub total_triangles: u64,
+    /// Id of the view cell the eye is in, if any.
+    pub cell: Option<String>,
+    /// The cell differs from the previous frame's.
+    pub cell_switch: bool,
+    /// The frame waited for a cell that was not resident yet.
+    pub stalled: bool,
+    /// Bytes held by the cell cache after the frame.
+    pub cache_bytes: u64,
+    /// The frame was drawn without impostors (e.g. outside every baked cell, or while the cell
+    /// was loading): all geometry instead.
+    pub fallback: bool,
+}
+
+impl FrameRecord {
+    /// Primitives drawn: near triangles + impostor quads in impostor mode, total triangles in
+    /// geometry mode (the bottom panel of the plot).
+    pub fn primitives(&self) -> u64 {
+        match self.mode {
+            Mode::Impostor => self.near_triangles + self.impostor_quads,
+            Mode::Geometry => self.total_triangles,
+        }
+    }
+}
+
+/// The CSV columns, in order.
+pub const CSV_COLUMNS: [&str; 13] = [
+    "frame",
+    "t",
+    "mode",
+    "cpu_ms",
+    "gpu_ms",
+    "near_triangles",
+    "impostor_quads",
+    "total_triangles",
+    "cell",
+    "cell_switch",
+    "stalled",
+    "cache_bytes",
+    "fallback",
+];
+
+/// A CSV field, quoted when it needs to be.
+fn field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// The records as CSV: a header row of [`CSV_COLUMNS`], then one row per record; numbers in
+/// Rust's shortest round-trip form, `None` as an empty field, booleans as `0`/`1`.
+pub fn to_csv(records: &[FrameRecord]) -> String {
+    let mut out = CSV_COLUMNS.join(",");
+    out.push('\n');
+    let b = |v: bool| if v { "1" } else { "0" };
+    for r in records {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            r.frame,
+            r.t,
+            r.mode.as_str(),
+            r.cpu_ms,
+            r.gpu_ms.map(|g| g.to_string()).unwrap_or_default(),
+            r.near_triangles,
+            r.impostor_quads,
+            r.total_triangles,
+            field(r.cell.as_deref().unwrap_or("")),
+            b(r.cell_switch),
+            b(r.stalled),
+            r.cache_bytes,
+            b(r.fallback),
+        );
+    }
+    out
+}
+
+/// Writes [`to_csv`] to `path` atomically.
+pub fn write_csv(path: &Path, records: &[FrameRecord]) -> Result<()> {
+    lemi_core::container::write_atomic(path, to_csv(records).as_bytes())
+        .with_context(|| format!("frame CSV {}", path.display()))
+}
+
+/// The nearest-rank `p`-th percentile (`0 ≤ p ≤ 100`) of sorted values (see the module doc);
+/// `None` for no values.
+pub fn nearest_rank(sorted: &[f64], p: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let n = sorted.len();
+    let rank = (p.clamp(0.0, 100.0) / 100.0 * n as f64).ceil() as usize;
+    Some(sorted[rank.clamp(1, n) - 1])
+}
+
+/// Frame-time statistics of one mode.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TimeStats {
+    pub frames: usize,
+    pub median_ms: Option<f64>,
+    pub p99_ms: Option<f64>,
+    pub mean_ms: Option<f64>,
+    pub max_ms: Option<f64>,
+    /// Frames per second over the whole replay: `1000 / mean_ms` (frames divided by their total
+    /// time, not the mean of per-frame rates).
+    pub mean_fps: Option<f64>,
+    /// Median GPU time (ms) of the frames that have one.
+    pub gpu_median_ms: Option<f64>,
+    /// Mean primitives per frame ([`FrameRecord::primitives`]).
+    pub mean_primitives: Option<f64>,
+}
+
+impl TimeStats {
+    pub fn of(records: &[FrameRecord]) -> TimeStats {
+        let sorted = |mut v: Vec<f64>| {
+            v.retain(|x| x.is_finite());
+            v.sort_by(f64::total_cmp);
+            v
+        };
+        let cpu = sorted(records.iter().map(|r| r.cpu_ms).collect());
+        let gpu = sorted(records.iter().filter_map(|r| r.gpu_ms).collect());
+        let mean = (!cpu.is_empty()).then(|| cpu.iter().sum::<f64>() / cpu.len() as f64);
+        TimeStats {
+            frames: records.len(),
+            median_ms: nearest_rank(&cpu, 50.0),
+            p99_ms: nearest_rank(&cpu, 99.0),
+            mean_ms: mean,
+            max_ms: cpu.last().copied(),
+            mean_fps: mean.filter(|&m| m > 0.0).map(|m| 1000.0 / m),
+            gpu_median_ms: nearest_rank(&gpu, 50.0),
+            mean_primitives: (!records.is_empty()).then(|| {
+                records.iter().map(|r| r.primitives() as f64).sum::<f64>() / records.len() as f64
+            }),
+        }
+    }
+}
+
+/// The summary JSON of a replay. Counts are of the impostor replay; a statistic with no frames
+/// behind it (e.g. no geometry replay) is `null`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Frames of the impostor replay.
+    pub frames: usize,
+    /// Frames of the geometry replay.
+    pub geometry_frames: usize,
+    /// Impostor frames that waited for a cell.
+    pub stalls: usize,
+    /// Impostor frames whose cell differs from the previous frame's.
+    pub cell_switches: usize,
+    /// Impostor frames drawn as all geometry instead.
+    pub fallback_frames: usize,
+    /// The most cache bytes after any impostor frame.
+    pub max_cache_bytes: u64,
+    pub impostor_median_ms: Option<f64>,
+    pub impostor_p99_ms: Option<f64>,
+    pub geometry_median_ms: Option<f64>,
+    pub geometry_p99_ms: Option<f64>,
+    /// `geometry_median_ms / impostor_median_ms`.
+    pub speedup_median: Option<f64>,
+    pub impostor_mean_fps: Option<f64>,
+    pub geometry_mean_fps: Option<f64>,
+    /// Everything about each mode.
+    pub impostor: TimeStats,
+    pub geometry: TimeStats,
+}
+
+impl Summary {
+    pub fn of(impostor: &[FrameRecord], geometry: &[FrameRecord]) -> Summary {
+        let i = TimeStats::of(impostor);
+        let g = TimeStats::of(geometry);
+        let speedup = match (g.median_ms, i.median_ms) {
+            (Some(gm), Some(im)) if im > 0.0 => Some(gm / im),
+            _ => None,
+        };
+        Summary {
+            frames: impostor.len(),
+            geometry_frames: geometry.len(),
+            stalls: impostor.iter().filter(|r| r.stalled).count(),
+            cell_switches: impostor.iter().filter(|r| r.cell_switch).count(),
+            fallback_frames: impostor.iter().filter(|r| r.fallback).count(),
+            max_cache_bytes: impostor.iter().map(|r| r.cache_bytes).max().unwrap_or(0),
+            impostor_median_ms: i.median_ms,
+            impostor_p99_ms: i.p99_ms,
+            geometry_median_ms: g.median_ms,
+            geometry_p99_ms: g.p99_ms,
+            speedup_median: speedup,
+            impostor_mean_fps: i.mean_fps,
+            geometry_mean_fps: g.mean_fps,
+            impostor: i,
+            geometry: g,
+        }
+    }
+
+    /// Writes the summary as pretty JSON, atomically.
+    pub fn write_json(&self, path: &Path) -> Result<()> {
+        let what = || format!("walk summary {}", path.display());
+        let mut text = serde_json::to_string_pretty(self).with_context(what)?;
+        text.push('\n');
+        lemi_core::container::write_atomic(path, text.as_bytes()).with_context(what)
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A record with the given mode and time; the rest plausible.
+    pub(crate) fn rec(frame: u64, mode: Mode, cpu_ms: f64) -> FrameRecord {
+        FrameRecord {
+            frame,
+            t: frame as f64 / 30.0,
+            mode,
+            cpu_ms,
+            gpu_ms: None,
+            near_triangles: if mode == Mode::Impostor { 1000 } else { 0 },
+            impostor_quads: if mode == Mode::Impostor { 200 } else { 0 },
+            total_triangles: if mode == Mode::Impostor {
+                1400
+            } else {
+                100_000
+            },
+            cell: Some("0_0_0".into()),
+            cell_switch: false,
+            stalled: false,
+            cache_bytes: 1 << 20,
+            fallback: false,
+        }
+    }
+
+    #[test]
+    fn nearest_rank_definition() {
+        let v: Vec<f64> = (1..=10).map(f64::from).collect();
+        assert_eq!(nearest_rank(&v, 50.0), Some(5.0)); // ceil(5) = 5th
+        assert_eq!(nearest_rank(&v, 99.0), Some(10.0)); // ceil(9.9) = 10th
+        assert_eq!(nearest_rank(&v, 90.0), Some(9.0));
+        assert_eq!(nearest_rank(&v, 0.0), Some(1.0));
+        assert_eq!(nearest_rank(&v, 100.0), Some(10.0));
+        assert_eq!(nearest_rank(&[7.0], 50.0), Some(7.0));
+        assert_eq!(nearest_rank(&[], 50.0), None);
+        let v: Vec<f64> = (1..=200).map(f64::from).collect();
+        assert_eq!(nearest_rank(&v, 99.0), Some(198.0)); // ceil(198) = 198th
+        assert_eq!(nearest_rank(&v, 50.0), Some(100.0)); // the lower middle
+    }
+
+    #[test]
+    fn summary_of_known_numbers() {
+        // Impostor frames 1..=100 ms (shuffled), geometry frames 3, 6, ..., 300 ms.
+        let mut imp: Vec<FrameRecord> = (0..100)
+            .map(|i| rec(i, Mode::Impostor, ((i * 37) % 100 + 1) as f64))
+            .collect();
+        imp[10].stalled = true;
+        imp[20].stalled = true;
+        imp[30].cell_switch = true;
+        imp[40].fallback = true;
+        imp[50].cache_bytes = 5 << 20;
+        imp[0].gpu_ms = Some(2.0);
+        imp[1].gpu_ms = Some(4.0);
+        imp[2].cpu_ms = f64::NAN; // left out: 99 finite values remain
+        let geo: Vec<FrameRecord> = (0..100)
+            .map(|i| rec(i, Mode::Geometry, 3.0 * (i + 1) as f64))
+            .collect();
+        let s = Summary::of(&imp, &geo);
+        assert_eq!(s.frames, 100);
+        assert_eq!(s.geometry_frames, 100);
+        assert_eq!(s.stalls, 2);
+        assert_eq!(s.cell_switches, 1);
+        assert_eq!(s.fallback_frames, 1);
+        assert_eq!(s.max_cache_bytes, 5 << 20);
+        // imp[2] had (2·37 % 100) + 1 = 75 ms; the rest 1..=100 without 75: 99 values.
+        // Median: 50th of 99 -> 50; p99: ceil(98.01) = 99th -> 100.
+        assert_eq!(s.impostor_median_ms, Some(50.0));
+        assert_eq!(s.impostor_p99_ms, Some(100.0));
+        assert_eq!(s.geometry_median_ms, Some(150.0));
+        assert_eq!(s.geometry_p99_ms, Some(297.0));
+        assert_eq!(s.speedup_median, Some(3.0));
+        let mean_imp = (5050.0 - 75.0) / 99.0;
+        assert!((s.impostor.mean_ms.unwrap() - mean_imp).abs() < 1e-12);
+        assert!((s.impostor_mean_fps.unwrap() - 1000.0 / mean_imp).abs() < 1e-9);
+        assert!((s.geometry_mean_fps.unwrap() - 1000.0 / 151.5).abs() < 1e-9);
+        assert_eq!(s.impostor.max_ms, Some(100.0));
+        assert_eq!(s.impostor.gpu_median_ms, Some(2.0));
+        assert_eq!(s.impostor.mean_primitives, Some(1200.0));
+        assert_eq!(s.geometry.mean_primitives, Some(100_000.0));
+        // JSON has the promised keys.
+        let v: serde_json::Value = serde_json::to_value(&s).unwrap();
+        for k in [
+            "frames",
+            "stalls",
+            "cell_switches",
+            "impostor_median_ms",
+            "impostor_p99_ms",
+            "geometry_median_ms",
+            "geometry_p99_ms",
+            "speedup_median",
+            "impostor_mean_fps",
+            "geometry_mean_fps",
+        ] {
+            assert!(v.get(k).is_some_and(|x| !x.is_null()), "{k}");
+        }
+        // No geometry replay: its numbers are null.
+        let s = Summary::of(&imp, &[]);
+        assert_eq!(s.geometry_median_ms, None);
+        assert_eq!(s.speedup_median, None);
+        let v: serde_json::Value = serde_json::to_value(&s).unwrap();
+        assert!(v["speedup_median"].is_null());
+        let empty = Summary::of(&[], &[]);
+        assert_eq!(empty.frames, 0);
+        assert_eq!(empty.impostor_median_ms, None);
+    }
+
+    #[test]
+    fn csv_has_a_header_and_stable_columns() {
+        let mut a = rec(0, Mode::Impostor, 12.5);
+        a.gpu_ms = Some(3.25);
+        a.cell_switch = true;
+        let mut b = rec(1, Mode::Geometry, 40.0);
+        b.cell = None;
+        b.stalled = true;
+        b.cell = Some("a,\"b".into());
+        let text = to_csv(&[a, b]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[0],
+            "frame,t,mode,cpu_ms,gpu_ms,near_triangles,impostor_quads,total_triangles,cell,\
+             cell_switch,stalled,cache_bytes,fallback"
+        );
+        assert_eq!(
+            lines[1],
+            "0,0,impostor,12.5,3.25,1000,200,1400,0_0_0,1,0,1048576,0"
+        );
+        assert_eq!(
+            lines[2],
+            "1,0.03333333333333333,geometry,40,,0,0,100000,\"a,\"\"b\",0,1,1048576,0"
+        );
+        assert_eq!(lines.len(), 3);
+        let dir = std::env::temp_dir().join(format!("lemi-walk-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("frames.csv");
+        write_csv(&f, &[rec(0, Mode::Impostor, 1.0)]).unwrap();
+        assert!(std::fs::read_to_string(&f).unwrap().starts_with("frame,t,"));
+        let s = Summary::of(&[rec(0, Mode::Impostor, 1.0)], &[]);
+        let j = dir.join("summary.json");
+        s.write_json(&j).unwrap();
+        let back: Summary = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+        assert_eq!(back, s);
+        let e = format!(
+            "{:#}",
+            write_csv(&dir.join("no/such/dir/x.csv"), &[]).unwrap_err()
+        );
+        assert!(e.contains("x.csv"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

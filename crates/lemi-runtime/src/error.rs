@@ -1,0 +1,38 @@
+//! Errors of the runtime. Every error about a cell names its file; none is a panic (DESIGN.md,
+//! "Nothing that comes from a user … may cause a panic").
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while streaming a bundle.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RuntimeError {
+    /// A cell could not be read, verified, decoded or uploaded; `path` is its file.
+    #[error("{}: {message}", path.display())]
+    Cell {
+        id: String,
+        path: PathBuf,
+        message: String,
+    },
+    /// The manifest is unusable for streaming (bad grid, unknown cell ids, …).
+    #[error("{}: {message}", path.display())]
+    Manifest { path: PathBuf, message: String },
+    /// An option is out of range; names the option.
+    #[error("streaming option `{option}`: {message}")]
+    Options {
+        option: &'static str,
+        message: String,
+    },
+    /// The background loader could not be started or stopped unexpectedly.
+    #[error("the background cell loader {0}")]
+    Loader(String),
+}
+
+impl RuntimeError {
+    /// The cell this error is about, if any.
+    pub fn cell_id(&self) -> Option<&str> {
+        match self {
+            RuntimeError::Cell { id, .. } => Some(id),
+            _ => None,
+        }
+    }
+}

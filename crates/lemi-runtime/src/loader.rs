@@ -1,0 +1,400 @@
+//! The background cell loader: reads, verifies and decodes cell files off the render thread.
+//!
+//! This work is based on GI 2002 sec. 3, runtime step 2: impostors of adjacent view cells are
+//! prefetched "in order to avoid varying frame rates". Everything that takes time and does not
+//! need the GPU happens here: reading the file, checking it against the manifest (size, BLAKE3 of
+//! the whole file, the parameters hash, the scene fingerprint, the cell's grid index), decoding the
+//! container, the quads and the PNG macro-textures, copying the near triangles out of the scene and
+//! laying out the quads' vertex arrays ([`ImpostorCellData::prepare`]). What is left for the render
+//! thread is uploading.
+//!
+//! Plain `std`: worker threads, a `Mutex` + `Condvar` guarded request queue and an `mpsc` channel
+//! for results. No crate is needed: the queue must be reordered and pruned on every request (a
+//! channel cannot), and std's `mpsc` is crossbeam's channel since Rust 1.67.
+//!
+//! - **Prioritised**: [`Loader::want`] replaces the queue with the caller's list, most wanted
+//!   first; cells no longer wanted are dropped from the queue (a cell being read is finished).
+//! - **De-duplicated**: a cell queued, being read, or delivered but not yet received is never
+//!   queued again.
+//! - **Errors are values**: a missing, damaged or mismatched file is delivered as a
+//!   [`RuntimeError::Cell`] naming the file; a panic while decoding (a bug) is caught and delivered
+//!   the same way, so the walk never crashes.
+//! - For tests, [`LoaderOptions::delay`] adds an artificial per-cell delay (interrupted on drop).
+
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use lemi_core::bundle::{CellEntry, CellFile, CellHeader, Manifest};
+use lemi_core::cell::CellGrid;
+use lemi_core::Scene;
+use lemi_gpu::impostor::ImpostorCellData;
+
+use crate::RuntimeError;
+
+/// How the loader works.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoaderOptions {
+    /// Worker threads (at least 1).
+    pub threads: usize,
+    /// Artificial delay before reading each cell (for tests of slow storage).
+    pub delay: Duration,
+}
+
+impl Default for LoaderOptions {
+    fn default() -> Self {
+        LoaderOptions {
+            threads: 1,
+            delay: Duration::ZERO,
+        }
+    }
+}
+
+/// A cell read, verified and decoded, ready for [`lemi_gpu::ImpostorCell::begin_upload`].
+pub struct DecodedCell {
+    pub id: String,
+    /// The cell file.
+    pub path: PathBuf,
+    /// The cell's header; its `quads` are in `data` (the header's list is left empty so as not to
+    /// hold them twice).
+    pub header: CellHeader,
+    /// Near geometry, quad vertex arrays and macro-textures, checked against the scene.
+    pub data: ImpostorCellData,
+    /// Bytes held in main memory (`data.cpu_bytes()`).
+    pub bytes: u64,
+    /// Size of the cell file.
+    pub file_bytes: u64,
+    /// Seconds spent reading and decoding (the artificial delay included).
+    pub seconds: f64,
+}
+
+impl std::fmt::Debug for DecodedCell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DecodedCell")
+            .field("id", &self.id)
+            .field("path", &self.path)
+            .field("bytes", &self.bytes)
+            .field("file_bytes", &self.file_bytes)
+            .field("seconds", &self.seconds)
+            .finish()
+    }
+}
+
+/// One delivered request.
+#[derive(Debug)]
+pub struct Loaded {
+    pub id: String,
+    pub result: Result<DecodedCell, RuntimeError>,
+}
+
+#[derive(Default)]
+struct State {
+    /// Most wanted first.
+    queue: Vec<String>,
+    in_flight: HashSet<String>,
+    /// Sent on the channel, not yet received.
+    sent: HashSet<String>,
+    shutdown: bool,
+}
+
+/// What every worker needs to load a cell.
+struct Context {
+    bundle: PathBuf,
+    entries: HashMap<String, CellEntry>,
+    params_hash: String,
+    fingerprint: String,
+    grid: CellGrid,
+    scene: Arc<Scene>,
+    delay: Duration,
+}
+
+struct Shared {
+    state: Mutex<State>,
+    wake: Condvar,
+    ctx: Context,
+}
+
+impl Shared {
+    /// The state, also after a worker panicked while holding the lock (the state stays
+    /// consistent: every update is a single set or queue operation).
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The background loader. Dropping it stops and joins its threads.
+pub struct Loader {
+    shared: Arc<Shared>,
+    results: Receiver<Loaded>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Loader {
+    /// Starts the workers for the cells of `manifest` in `bundle_dir`. `scene` is the scene the
+    /// bundle was baked from (near lists index its meshes).
+    pub fn spawn(
+        manifest: &Manifest,
+        bundle_dir: &Path,
+        scene: Arc<Scene>,
+        options: LoaderOptions,
+    ) -> Result<Loader, RuntimeError> {
+        if options.threads == 0 || options.threads > 64 {
+            return Err(RuntimeError::Options {
+                option: "loader.threads",
+                message: format!("must be 1..=64 (got {})", options.threads),
+            });
+        }
+        let shared = Arc::new(Shared {
+            state: Mutex::new(State::default()),
+            wake: Condvar::new(),
+            ctx: Context {
+                bundle: bundle_dir.to_path_buf(),
+                entries: manifest
+                    .cells
+                    .iter()
+                    .map(|e| (e.id.clone(), e.clone()))
+                    .collect(),
+                params_hash: manifest.params_hash.clone(),
+                fingerprint: manifest.scene.fingerprint.clone(),
+                grid: manifest.grid.clone(),
+                scene,
+                delay: options.delay,
+            },
+        });
+        let (tx, results) = mpsc::channel();
+        let mut threads = Vec::with_capacity(options.threads);
+        for k in 0..options.threads {
+            let (worker_shared, tx) = (shared.clone(), tx.clone());
+            let spawned = std::thread::Builder::new()
+                .name(format!("lemi-loader-{k}"))
+                .spawn(move || worker(&worker_shared, &tx));
+            match spawned {
+                Ok(t) => threads.push(t),
+                Err(e) => {
+                    let loader = Loader {
+                        shared,
+                        results,
+                        threads,
+                    };
+                    drop(loader);
+                    return Err(RuntimeError::Loader(format!("could not be started: {e}")));
+                }
+            }
+        }
+        Ok(Loader {
+            shared,
+            results,
+            threads,
+        })
+    }
+
+    /// Replaces the queue with `ids`, most wanted first. Cells already queued, being read, or
+    /// delivered but not yet received are not queued again; queued cells not in `ids` are
+    /// dropped; repeated ids count once.
+    pub fn want(&self, ids: &[&str]) {
+        let mut st = self.shared.lock();
+        let mut seen = HashSet::new();
+        let queue: Vec<String> = ids
+            .iter()
+            .filter(|id| {
+                seen.insert(**id) && !st.in_flight.contains(**id) && !st.sent.contains(**id)
+            })
+            .map(|id| id.to_string())
+            .collect();
+        st.queue = queue;
+        if !st.queue.is_empty() {
+            self.shared.wake.notify_all();
+        }
+    }
+
+    /// Whether `id` is queued, being read, or delivered and not yet received.
+    pub fn is_pending(&self, id: &str) -> bool {
+        let st = self.shared.lock();
+        st.queue.iter().any(|q| q == id) || st.in_flight.contains(id) || st.sent.contains(id)
+    }
+
+    /// Cells queued or being read.
+    pub fn pending(&self) -> usize {
+        let st = self.shared.lock();
+        st.queue.len() + st.in_flight.len()
+    }
+
+    /// A delivered cell, if one is waiting.
+    pub fn try_recv(&self) -> Result<Option<Loaded>, RuntimeError> {
+        match self.results.try_recv() {
+            Ok(l) => Ok(Some(self.received(l))),
+            Err(TryRecvError::Empty) => Ok(None),
+            Err(TryRecvError::Disconnected) => Err(gone()),
+        }
+    }
+
+    /// Waits up to `timeout` for a delivered cell.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Loaded>, RuntimeError> {
+        match self.results.recv_timeout(timeout) {
+            Ok(l) => Ok(Some(self.received(l))),
+            Err(RecvTimeoutError::Timeout) => Ok(None),
+            Err(RecvTimeoutError::Disconnected) => Err(gone()),
+        }
+    }
+
+    fn received(&self, l: Loaded) -> Loaded {
+        self.shared.lock().sent.remove(&l.id);
+        l
+    }
+}
+
+fn gone() -> RuntimeError {
+    RuntimeError::Loader("stopped: every worker thread has exited".into())
+}
+
+impl Drop for Loader {
+    fn drop(&mut self) {
+        self.shared.lock().shutdown = true;
+        self.shared.wake.notify_all();
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+fn worker(shared: &Shared, tx: &Sender<Loaded>) {
+    loop {
+        let id = {
+            let mut st = shared.lock();
+            loop {
+                if st.shutdown {
+                    return;
+                }
+                if !st.queue.is_empty() {
+                    break;
+                }
+                st = shared.wake.wait(st).unwrap_or_else(|p| p.into_inner());
+            }
+            let id = st.queue.remove(0);
+            st.in_flight.insert(id.clone());
+            id
+        };
+        let t0 = Instant::now();
+        if !shared.ctx.delay.is_zero() {
+            let st = shared.lock();
+            let (st, _) = shared
+                .wake
+                .wait_timeout_while(st, shared.ctx.delay, |s| !s.shutdown)
+                .unwrap_or_else(|p| p.into_inner());
+            if st.shutdown {
+                return;
+            }
+        }
+        let result =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load(&shared.ctx, &id, t0)))
+                .unwrap_or_else(|panic| {
+                    let what = panic
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_else(|| "unknown panic".into());
+                    Err(cell_error(
+                        &shared.ctx,
+                        &id,
+                        format!("decoding failed unexpectedly (a bug in lemi): {what}"),
+                    ))
+                });
+        {
+            let mut st = shared.lock();
+            st.in_flight.remove(&id);
+            st.sent.insert(id.clone());
+        }
+        if tx.send(Loaded { id, result }).is_err() {
+            return;
+        }
+    }
+}
+
+fn cell_path(ctx: &Context, id: &str) -> PathBuf {
+    match ctx.entries.get(id) {
+        Some(e) => ctx.bundle.join(&e.file),
+        None => ctx.bundle.join(lemi_core::bundle::cell_file_name(id)),
+    }
+}
+
+fn cell_error(ctx: &Context, id: &str, message: String) -> RuntimeError {
+    RuntimeError::Cell {
+        id: id.to_string(),
+        path: cell_path(ctx, id),
+        message,
+    }
+}
+
+fn short(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
+}
+
+/// Reads, verifies and decodes one cell.
+fn load(ctx: &Context, id: &str, t0: Instant) -> Result<DecodedCell, RuntimeError> {
+    let err = |m: String| cell_error(ctx, id, m);
+    let Some(entry) = ctx.entries.get(id) else {
+        return Err(err(format!("cell {id} is not in the bundle's manifest")));
+    };
+    let path = ctx.bundle.join(&entry.file);
+    let bytes = std::fs::read(&path).map_err(|e| err(format!("cannot read the cell file: {e}")))?;
+    if bytes.len() as u64 != entry.bytes {
+        return Err(err(format!(
+            "is {} bytes, the manifest says {} (changed or damaged after baking); bake it again",
+            bytes.len(),
+            entry.bytes
+        )));
+    }
+    if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
+        return Err(err(
+            "does not match the manifest's BLAKE3 hash (changed or damaged after baking); bake it again"
+                .into(),
+        ));
+    }
+    let file = CellFile::decode(&bytes).map_err(|e| err(e.to_string()))?;
+    if file.header.params_hash != ctx.params_hash {
+        return Err(err(format!(
+            "baked with other parameters than the bundle (parameters hash {}…, the manifest says {}…); bake it again",
+            short(&file.header.params_hash),
+            short(&ctx.params_hash)
+        )));
+    }
+    if file.header.scene_fingerprint != ctx.fingerprint {
+        return Err(err(format!(
+            "baked from another scene than the bundle (fingerprint {}…, the manifest says {}…); bake it again",
+            short(&file.header.scene_fingerprint),
+            short(&ctx.fingerprint)
+        )));
+    }
+    match ctx.grid.parse_id(id) {
+        Ok(cell) if cell.index == file.header.cell.index => {}
+        Ok(_) => {
+            return Err(err(format!(
+                "holds cell {}, not {id}",
+                file.header.cell.id()
+            )))
+        }
+        Err(e) => return Err(err(e.to_string())),
+    }
+    let macros = file.decode_macros().map_err(|e| err(e.to_string()))?;
+    let CellFile {
+        mut header, near, ..
+    } = file;
+    let quads = std::mem::take(&mut header.quads);
+    let data = ImpostorCellData::prepare(&ctx.scene, &near, &quads, macros).map_err(|e| {
+        err(format!(
+            "does not fit the scene it is drawn with: {e} (is it the scene the bundle was baked from?)"
+        ))
+    })?;
+    Ok(DecodedCell {
+        id: id.to_string(),
+        path,
+        header,
+        bytes: data.cpu_bytes(),
+        data,
+        file_bytes: bytes.len() as u64,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
