@@ -8,6 +8,7 @@ mod cmd_eval;
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
+mod cmd_view;
 mod cmd_walk;
 mod load;
 mod walk;
@@ -36,6 +37,8 @@ enum Command {
     Render(cmd_render::Args),
     /// Replay a camera path through a bundle: streaming impostors vs. all geometry, frame times.
     Walk(cmd_walk::Args),
+    /// Fly or walk through a bundle in a window: HUD, impostors/geometry and layer toggles, path recording.
+    View(cmd_view::Args),
     /// Compute the layer placement of a view cell (the error metric).
     Layers(cmd_layers::Args),
 }
@@ -50,6 +53,7 @@ fn main() {
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),
         Command::Walk(a) => cmd_walk::run(a),
+        Command::View(a) => cmd_view::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", error_chain(&e));

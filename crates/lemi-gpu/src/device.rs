@@ -57,7 +57,7 @@ impl BackendChoice {
     }
 
     /// The backend sets to try, in order.
-    fn attempts(self) -> Vec<wgpu::Backends> {
+    pub(crate) fn attempts(self) -> Vec<wgpu::Backends> {
         match self {
             BackendChoice::Auto => match wgpu::Backends::from_env() {
                 Some(b) => vec![b],
@@ -186,6 +186,21 @@ impl Gpu {
             )));
         }
         Err(GpuError::NoAdapter(no_adapter_message(&choice.to_string())))
+    }
+
+    /// A `Gpu` from a device opened elsewhere (the window surface's adapter, `crate::surface`).
+    pub(crate) fn from_parts(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+    ) -> Gpu {
+        let layouts = crate::shading::Layouts::new(&device);
+        Gpu {
+            device,
+            queue,
+            info,
+            layouts,
+        }
     }
 
     /// The adapter's description.

@@ -27,6 +27,7 @@ pub mod recorder;
 mod renderer;
 mod scene;
 pub mod shading;
+mod surface;
 pub mod texture;
 
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
@@ -42,3 +43,4 @@ pub use scene::{
     GpuChunk, GpuGeometry, GpuMaterials, GpuScene, UploadOptions, DEFAULT_MAX_CHUNK_BYTES,
 };
 pub use shading::{Lighting, ShadingGlobals};
+pub use surface::{Presented, WindowSurface};
