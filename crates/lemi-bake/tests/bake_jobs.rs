@@ -23,24 +23,14 @@ use lemi_core::bundle::{
 };
 use lemi_core::cell::{CellGrid, Shard, ViewCell};
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
-use lemi_gpu::{BackendChoice, Gpu};
+use lemi_gpu::Gpu;
 
 // ---------------------------------------------------------------------------------------------
 // fixtures
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 /// Small parameters: with α = 0.02 rad the 4 layers of a 10 m cell lie at about 393, 131, 79 and

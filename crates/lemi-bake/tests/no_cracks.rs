@@ -59,8 +59,8 @@ use lemi_core::compress::{
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuGeometry, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
-    LayerRecorder, Lighting, MaterialRun, RenderOptions, Renderer, UploadOptions,
+    Frame, Gpu, GpuGeometry, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, LayerRecorder,
+    Lighting, MaterialRun, RenderOptions, Renderer, UploadOptions,
 };
 
 /// Texels per face side, and the output view's width and height (90° field of view).
@@ -87,17 +87,7 @@ const ALL_FACES: [Face; 6] = [
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -14,20 +14,10 @@ use lemi_core::cell::CellGrid;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
 use lemi_eval::{evaluate_bundle, EvalOptions, EvalRun, ViewpointSet};
-use lemi_gpu::{BackendChoice, Gpu};
+use lemi_gpu::Gpu;
 
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 const W: u32 = 256;

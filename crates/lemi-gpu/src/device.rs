@@ -115,6 +115,23 @@ impl fmt::Debug for Gpu {
 }
 
 impl Gpu {
+    /// The adapter for test suites: `Some` when one exists; `None` (the test is skipped, with a
+    /// printed reason) when none exists and `LEMI_SKIP_GPU_TESTS=1`; otherwise it panics with the
+    /// install hint, so a CI machine without drivers fails loudly instead of skipping silently.
+    pub fn for_tests() -> Option<Gpu> {
+        match Gpu::new(BackendChoice::Auto) {
+            Ok(g) => Some(g),
+            Err(e) => {
+                if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
+                    eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
+                    None
+                } else {
+                    panic!("{e}");
+                }
+            }
+        }
+    }
+
     /// Finds an adapter for `choice` and opens a device with the adapter's limits.
     pub fn new(choice: BackendChoice) -> Result<Gpu, GpuError> {
         pollster::block_on(Self::new_async(choice))

@@ -1331,22 +1331,12 @@ mod incremental_tests {
     //! the one-shot [`ImpostorCell::upload`], on whatever adapter wgpu finds. Without an adapter
     //! the test fails with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
     use super::*;
-    use crate::BackendChoice;
+
     use lemi_core::camera::Camera;
     use lemi_core::{Face, Material, SceneBuilder, Vertex};
 
     fn gpu() -> Option<Gpu> {
-        match Gpu::new(BackendChoice::Auto) {
-            Ok(g) => Some(g),
-            Err(e) => {
-                if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                    eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                    None
-                } else {
-                    panic!("{e}");
-                }
-            }
-        }
+        Gpu::for_tests()
     }
 
     /// A quad facing a camera at the origin looking along −Z, at depth `z`.

@@ -11,23 +11,13 @@ use lemi_core::camera::Camera;
 use lemi_core::compress::MacroTexture;
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
 use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
-    RenderOptions, Renderer, UploadOptions,
+    Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions,
+    Renderer, UploadOptions,
 };
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 /// A 64×64, 90° camera at `eye` looking along −Z: a point at view depth `d` and offset `(x, y)`

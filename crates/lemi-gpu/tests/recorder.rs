@@ -9,23 +9,13 @@ use lemi_core::camera::View;
 use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::{Face, Material, Mesh, SceneBuilder, Texture};
 use lemi_gpu::{
-    BackendChoice, Gpu, GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun,
-    RenderOptions, Renderer, UploadOptions,
+    Gpu, GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RenderOptions,
+    Renderer, UploadOptions,
 };
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 fn white_materials(gpu: &Gpu) -> GpuMaterials {

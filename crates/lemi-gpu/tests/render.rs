@@ -6,23 +6,11 @@ use glam::DVec3;
 use lemi_core::camera::Camera;
 use lemi_core::{Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
 use lemi_gpu::shading::{linear_to_srgb, srgb_to_linear};
-use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuScene, Lighting, RenderOptions, Renderer, UploadOptions,
-};
+use lemi_gpu::{Frame, Gpu, GpuScene, Lighting, RenderOptions, Renderer, UploadOptions};
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 fn vertex(p: [f32; 3], uv: [f32; 2], color: [u8; 4]) -> Vertex {

@@ -25,7 +25,7 @@ use lemi_core::bundle::{cell_file_name, BakeParams, CellFile, Manifest, SceneRef
 use lemi_core::camera::Camera;
 use lemi_core::cell::CellGrid;
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
-use lemi_gpu::{BackendChoice, Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
+use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
 use lemi_runtime::{
     CellState, FrameState, LoaderOptions, RuntimeError, StallPolicy, Streamer, StreamerOptions,
 };
@@ -35,17 +35,7 @@ use lemi_runtime::{
 
 /// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
 fn gpu() -> Option<Gpu> {
-    match Gpu::new(BackendChoice::Auto) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") {
-                eprintln!("skipping GPU test (LEMI_SKIP_GPU_TESTS=1): {e}");
-                None
-            } else {
-                panic!("{e}");
-            }
-        }
-    }
+    Gpu::for_tests()
 }
 
 /// The tests pace frames in real time against a background thread: run them one at a time so
