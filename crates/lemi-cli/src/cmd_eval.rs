@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output size `WIDTHxHEIGHT`; default: the bake's output width at 16:9.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = crate::cmd_render::parse_size)]
     pub size: Option<(u32, u32)>,
     /// Horizontal field of view in degrees; default: the bake's.
     #[arg(long)]
@@ -57,21 +57,6 @@ pub struct Args {
     /// Print the bundle summary as JSON (per cell under `cells`).
     #[arg(long)]
     pub json: bool,
-}
-
-fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
-    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|e| format!("`{s}`: height: {e}"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("`{s}`: width and height must be 1..=16384"));
-    }
-    Ok((w, h))
 }
 
 pub fn run(args: Args) -> Result<()> {

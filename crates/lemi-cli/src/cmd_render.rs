@@ -95,12 +95,14 @@ fn parse_numbers(s: &str, n: usize) -> Result<Vec<f64>, String> {
     Ok(v)
 }
 
-fn parse_vec3(s: &str) -> Result<DVec3, String> {
+/// `x,y,z` (three finite numbers), for every command's point flags.
+pub(crate) fn parse_vec3(s: &str) -> Result<DVec3, String> {
     let v = parse_numbers(s, 3)?;
     Ok(DVec3::new(v[0], v[1], v[2]))
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+/// `WIDTHxHEIGHT` (each 1..=16384), for every command's `--size`.
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
@@ -109,8 +111,8 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
         .trim()
         .parse()
         .map_err(|e| format!("`{s}`: height: {e}"))?;
-    if w == 0 || h == 0 {
-        return Err(format!("`{s}`: width and height must be at least 1"));
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("`{s}`: width and height must be 1..=16384"));
     }
     Ok((w, h))
 }

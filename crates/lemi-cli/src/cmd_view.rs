@@ -50,7 +50,7 @@ pub struct Args {
     /// The bundle directory.
     pub bundle: PathBuf,
     /// Window size `WIDTHxHEIGHT` (physical pixels).
-    #[arg(long, value_parser = parse_size, default_value = "960x540")]
+    #[arg(long, value_parser = crate::cmd_render::parse_size, default_value = "960x540")]
     pub size: (u32, u32),
     /// Render at this fraction of the window's pixels (the image is stretched to the window);
     /// below 1 for speed on a software rasterizer.
@@ -60,7 +60,7 @@ pub struct Args {
     #[arg(long)]
     pub fov: Option<f64>,
     /// Start position `x,y,z` (metres); default: the centre of the first baked cell.
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = crate::cmd_render::parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<DVec3>,
     /// Start heading in degrees (0 looks along −Z, 90 along +X).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
@@ -121,33 +121,6 @@ pub struct Args {
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
-}
-
-fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 960x540"))?;
-    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|e| format!("`{s}`: height: {e}"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("`{s}`: width and height must be 1..=16384"));
-    }
-    Ok((w, h))
-}
-
-fn parse_vec3(s: &str) -> std::result::Result<DVec3, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| format!("`{s}`: {e} (expected x,y,z)"))?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(*x, *y, *z)),
-        _ => Err(format!("`{s}`: expected three finite numbers x,y,z")),
-    }
 }
 
 /// The display the window needs, or the error that says what to do without one.

@@ -38,7 +38,7 @@ pub struct Args {
     #[arg(long, value_name = "PATH.json")]
     pub path: Option<PathBuf>,
     /// Output size `WIDTHxHEIGHT`.
-    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    #[arg(long, value_parser = crate::cmd_render::parse_size, default_value = "1280x720")]
     pub size: (u32, u32),
     /// Horizontal field of view in degrees; default: the bake's output view (60° without one).
     #[arg(long)]
@@ -92,21 +92,6 @@ pub struct Args {
 pub enum StallArg {
     Block,
     Fallback,
-}
-
-fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
-    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|e| format!("`{s}`: height: {e}"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("`{s}`: width and height must be 1..=16384"));
-    }
-    Ok((w, h))
 }
 
 pub fn run(args: Args) -> Result<()> {
