@@ -37,12 +37,10 @@ use lemi_core::compress::MacroTexture;
 use lemi_core::{Mesh, Scene};
 use wgpu::util::DeviceExt;
 
-use crate::renderer::{
-    padded_bytes_per_row, read_rows, Frame, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT,
-    VIEW_DEPTH_FORMAT,
-};
+use crate::renderer::{Frame, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
 use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
 use crate::shading::{vertex_layout, ShadingGlobals, SHADING_WGSL};
+use crate::targets::Targets;
 use crate::{Gpu, GpuError};
 
 /// The reference renderer's entry points: the near geometry is drawn with exactly this source.
@@ -466,58 +464,6 @@ fn upload_macro(gpu: &Gpu, label: &str, m: &MacroTexture) -> wgpu::TextureView {
     texture.create_view(&wgpu::TextureViewDescriptor::default())
 }
 
-struct Targets {
-    width: u32,
-    height: u32,
-    color: wgpu::Texture,
-    view_depth: wgpu::Texture,
-    depth: wgpu::Texture,
-    color_readback: wgpu::Buffer,
-    depth_readback: wgpu::Buffer,
-}
-
-fn make_targets(device: &wgpu::Device, width: u32, height: u32) -> Targets {
-    let size = wgpu::Extent3d {
-        width,
-        height,
-        depth_or_array_layers: 1,
-    };
-    let tex = |label: &str, format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
-    let readback = |label: &str| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: padded_bytes_per_row(width, 4) as u64 * height as u64,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    Targets {
-        width,
-        height,
-        color: tex("lemi impostor colour", COLOR_FORMAT, rt),
-        view_depth: tex("lemi impostor view depth", VIEW_DEPTH_FORMAT, rt),
-        depth: tex(
-            "lemi impostor depth",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        ),
-        color_readback: readback("lemi impostor colour readback"),
-        depth_readback: readback("lemi impostor depth readback"),
-    }
-}
-
 /// Draws [`ImpostorCell`]s: the reference pipeline for near geometry, the quad pipeline, globals
 /// and cached render targets.
 pub struct ImpostorRenderer {
@@ -717,7 +663,7 @@ impl ImpostorRenderer {
             *guard = Some(crate::device::scoped(
                 &self.device,
                 "creating impostor render targets",
-                || make_targets(&self.device, width, height),
+                || Targets::new(&self.device, width, height, "lemi impostor"),
             )?);
         }
         let Some(targets) = guard.as_ref() else {
@@ -731,42 +677,8 @@ impl ImpostorRenderer {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("lemi impostor render"),
                 });
-            let color_view = targets.color.create_view(&Default::default());
-            let vdepth_view = targets.view_depth.create_view(&Default::default());
-            let depth_view = targets.depth.create_view(&Default::default());
             {
-                let clear = wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                };
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("lemi impostor pass"),
-                    color_attachments: &[
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &color_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &vdepth_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                    ],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(0.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = targets.begin_pass(&mut encoder, "lemi impostor pass");
                 if with_near && !near.geometry.chunks().is_empty() {
                     pass.set_pipeline(&self.near_pipeline);
                     pass.set_bind_group(0, &self.globals_group, &[]);
@@ -800,40 +712,10 @@ impl ImpostorRenderer {
                     }
                 }
             }
-            for (texture, buffer) in [
-                (&targets.color, &targets.color_readback),
-                (&targets.view_depth, &targets.depth_readback),
-            ] {
-                encoder.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo {
-                        texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::TexelCopyBufferInfo {
-                        buffer,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(padded_bytes_per_row(width, 4)),
-                            rows_per_image: Some(height),
-                        },
-                    },
-                    wgpu::Extent3d {
-                        width,
-                        height,
-                        depth_or_array_layers: 1,
-                    },
-                );
-            }
+            targets.copy_to_readback(&mut encoder);
             self.queue.submit([encoder.finish()]);
         })?;
-        let mut rgba = read_rows(&self.device, &targets.color_readback, width, height)?;
-        let depth_bytes = read_rows(&self.device, &targets.depth_readback, width, height)?;
-        let mut depth: Vec<f32> = depth_bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
+        let (mut rgba, mut depth) = targets.read(&self.device)?;
         // Every drawn fragment writes alpha 1; alpha 0 is the clear.
         for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
             if px[3] == 0 {

@@ -28,6 +28,7 @@ mod renderer;
 mod scene;
 pub mod shading;
 mod surface;
+mod targets;
 pub mod texture;
 
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};

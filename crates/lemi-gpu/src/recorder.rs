@@ -33,8 +33,9 @@ use lemi_core::clip::ClipVertex;
 use lemi_core::Face;
 use wgpu::util::DeviceExt;
 
-use crate::renderer::{padded_bytes_per_row, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
+use crate::renderer::{COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
 use crate::shading::{Lighting, ShadingGlobals, SHADING_WGSL};
+use crate::targets::Targets;
 use crate::{Gpu, GpuError, GpuMaterials};
 
 const RECORDER_WGSL: &str = include_str!("recorder.wgsl");
@@ -110,14 +111,6 @@ const REC_ATTRIBUTES: [wgpu::VertexAttribute; 12] = wgpu::vertex_attr_array![
     10 => Float32x4,
     11 => Float32x4,
 ];
-
-struct Targets {
-    color: wgpu::Texture,
-    view_depth: wgpu::Texture,
-    depth: wgpu::Texture,
-    color_readback: wgpu::Buffer,
-    depth_readback: wgpu::Buffer,
-}
 
 /// Records layers of one resolution; pipeline and render targets are made once.
 pub struct LayerRecorder {
@@ -218,7 +211,7 @@ impl LayerRecorder {
                 globals,
                 globals_group,
                 res,
-                targets: Mutex::new(make_targets(device, res)),
+                targets: Mutex::new(Targets::new(device, res, res, "lemi layer")),
             }
         })
     }
@@ -309,42 +302,8 @@ impl LayerRecorder {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("lemi record"),
                 });
-            let color_view = targets.color.create_view(&Default::default());
-            let vdepth_view = targets.view_depth.create_view(&Default::default());
-            let depth_view = targets.depth.create_view(&Default::default());
             {
-                let clear = wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                };
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("lemi layer pass"),
-                    color_attachments: &[
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &color_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &vdepth_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                    ],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(0.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = targets.begin_pass(&mut encoder, "lemi layer pass");
                 if let Some(buffer) = &buffer {
                     pass.set_pipeline(&self.pipeline);
                     pass.set_bind_group(0, &self.globals_group, &[]);
@@ -357,41 +316,10 @@ impl LayerRecorder {
                     }
                 }
             }
-            for (texture, buffer) in [
-                (&targets.color, &targets.color_readback),
-                (&targets.view_depth, &targets.depth_readback),
-            ] {
-                encoder.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo {
-                        texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::TexelCopyBufferInfo {
-                        buffer,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(padded_bytes_per_row(self.res, 4)),
-                            rows_per_image: Some(self.res),
-                        },
-                    },
-                    wgpu::Extent3d {
-                        width: self.res,
-                        height: self.res,
-                        depth_or_array_layers: 1,
-                    },
-                );
-            }
+            targets.copy_to_readback(&mut encoder);
             self.queue.submit([encoder.finish()]);
         })?;
-        let mut rgba =
-            crate::renderer::read_rows(&self.device, &targets.color_readback, self.res, self.res)?;
-        let mut depth: Vec<f32> =
-            crate::renderer::read_rows(&self.device, &targets.depth_readback, self.res, self.res)?
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
+        let (mut rgba, mut depth) = targets.read(&self.device)?;
         for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
             if px[3] == 0 {
                 px.copy_from_slice(&[0; 4]);
@@ -405,46 +333,6 @@ impl LayerRecorder {
             rgba,
             depth,
         })
-    }
-}
-
-fn make_targets(device: &wgpu::Device, res: u32) -> Targets {
-    let size = wgpu::Extent3d {
-        width: res,
-        height: res,
-        depth_or_array_layers: 1,
-    };
-    let tex = |label: &str, format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
-    let readback = |label: &str| {
-        device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some(label),
-            size: padded_bytes_per_row(res, 4) as u64 * res as u64,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    };
-    Targets {
-        color: tex("lemi layer colour", COLOR_FORMAT, rt),
-        view_depth: tex("lemi layer depth", VIEW_DEPTH_FORMAT, rt),
-        depth: tex(
-            "lemi layer z",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        ),
-        color_readback: readback("lemi layer colour readback"),
-        depth_readback: readback("lemi layer depth readback"),
     }
 }
 

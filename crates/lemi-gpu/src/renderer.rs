@@ -13,6 +13,7 @@ use lemi_core::camera::View;
 
 use crate::scene::GpuScene;
 use crate::shading::{vertex_layout, Lighting, ShadingGlobals, SHADING_WGSL};
+use crate::targets::Targets;
 use crate::{Gpu, GpuError};
 
 /// The colour target format: linear shading output, encoded to sRGB on store.
@@ -80,16 +81,6 @@ impl Frame {
     pub fn covered_count(&self) -> usize {
         self.depth.iter().filter(|d| d.is_finite()).count()
     }
-}
-
-struct Targets {
-    width: u32,
-    height: u32,
-    color: wgpu::Texture,
-    view_depth: wgpu::Texture,
-    depth: wgpu::Texture,
-    color_readback: wgpu::Buffer,
-    depth_readback: wgpu::Buffer,
 }
 
 /// Bytes per row padded to `COPY_BYTES_PER_ROW_ALIGNMENT` (256).
@@ -192,48 +183,6 @@ impl Renderer {
         })
     }
 
-    fn make_targets(&self, width: u32, height: u32) -> Targets {
-        let size = wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        };
-        let tex = |label: &str, format, usage| {
-            self.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
-        let readback = |label: &str, bpt: u32| {
-            self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: padded_bytes_per_row(width, bpt) as u64 * height as u64,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
-        Targets {
-            width,
-            height,
-            color: tex("lemi colour", COLOR_FORMAT, rt),
-            view_depth: tex("lemi view depth", VIEW_DEPTH_FORMAT, rt),
-            depth: tex(
-                "lemi depth",
-                DEPTH_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT,
-            ),
-            color_readback: readback("lemi colour readback", 4),
-            depth_readback: readback("lemi depth readback", 4),
-        }
-    }
-
     /// Renders `scene` from `view` and reads the colour and depth images back.
     pub fn render(
         &self,
@@ -260,7 +209,7 @@ impl Renderer {
             *guard = Some(crate::device::scoped(
                 &self.device,
                 "creating render targets",
-                || self.make_targets(width, height),
+                || Targets::new(&self.device, width, height, "lemi"),
             )?);
         }
         let Some(targets) = guard.as_ref() else {
@@ -283,42 +232,8 @@ impl Renderer {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("lemi render"),
                 });
-            let color_view = targets.color.create_view(&Default::default());
-            let vdepth_view = targets.view_depth.create_view(&Default::default());
-            let depth_view = targets.depth.create_view(&Default::default());
             {
-                let clear = wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                };
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("lemi reference pass"),
-                    color_attachments: &[
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &color_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                        Some(wgpu::RenderPassColorAttachment {
-                            view: &vdepth_view,
-                            depth_slice: None,
-                            resolve_target: None,
-                            ops: clear,
-                        }),
-                    ],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth_view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(0.0),
-                            store: wgpu::StoreOp::Discard,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: None,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                let mut pass = targets.begin_pass(&mut encoder, "lemi reference pass");
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
@@ -334,41 +249,10 @@ impl Renderer {
                     pass.draw_indexed(0..chunk.index_count, 0, 0..1);
                 }
             }
-            for (texture, buffer) in [
-                (&targets.color, &targets.color_readback),
-                (&targets.view_depth, &targets.depth_readback),
-            ] {
-                encoder.copy_texture_to_buffer(
-                    wgpu::TexelCopyTextureInfo {
-                        texture,
-                        mip_level: 0,
-                        origin: wgpu::Origin3d::ZERO,
-                        aspect: wgpu::TextureAspect::All,
-                    },
-                    wgpu::TexelCopyBufferInfo {
-                        buffer,
-                        layout: wgpu::TexelCopyBufferLayout {
-                            offset: 0,
-                            bytes_per_row: Some(padded_bytes_per_row(width, 4)),
-                            rows_per_image: Some(height),
-                        },
-                    },
-                    wgpu::Extent3d {
-                        width,
-                        height,
-                        depth_or_array_layers: 1,
-                    },
-                );
-            }
+            targets.copy_to_readback(&mut encoder);
             self.queue.submit([encoder.finish()]);
         })?;
-        let rgba = read_rows(&self.device, &targets.color_readback, width, height)?;
-        let depth_bytes = read_rows(&self.device, &targets.depth_readback, width, height)?;
-        let mut depth: Vec<f32> = depth_bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect();
-        let mut rgba = rgba;
+        let (mut rgba, mut depth) = targets.read(&self.device)?;
         // The depth target is cleared to 0; the colour alpha (255 where a fragment was written, 0
         // after the clear) tells geometry from background.
         for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
