@@ -399,3 +399,79 @@ fn walk_auto_writes_records_summary_and_plot() {
     );
     assert_clean_error(&lemi(&["walk", b]), "--auto");
 }
+
+/// `lemi eval`: a quick certificate through the binary, its gates, and clear errors for bad input.
+#[test]
+fn eval_certificate_gates_and_bad_input() {
+    let d = tmp("eval");
+    let bundle = d.join("bundle");
+    let b = bundle.to_str().unwrap();
+    let o = lemi(&[
+        "bake",
+        "builtin:city:20k:3",
+        "--region",
+        "15,1.7,-5,25,1.7,5",
+        "--cell-size",
+        "10",
+        "--cell-height",
+        "1",
+        "--resolution",
+        "64",
+        "--near-field",
+        "12",
+        "--alpha-deg",
+        "1",
+        "-o",
+        b,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let quick = [
+        "eval",
+        b,
+        "--corners-only",
+        "--viewpoints",
+        "0",
+        "--size",
+        "96x54",
+    ];
+    let mut args = quick.to_vec();
+    args.push("--json");
+    let o = lemi(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in [
+        "views",
+        "max_error_px",
+        "p99_error_px",
+        "crack_pixels",
+        "mean_flip",
+        "coverage",
+        "cells",
+    ] {
+        assert!(!v[key].is_null(), "{key} missing");
+    }
+    assert_eq!(v["views"], 9 * 8);
+    assert!(bundle.join("eval/index.html").is_file());
+    // an impossible gate fails with status 2 and says why
+    let mut args = quick.to_vec();
+    args.extend(["--require-max-px", "0"]);
+    let o = lemi(&args);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--require-max-px"), "{}", stderr(&o));
+    // bad input
+    assert_clean_error(&lemi(&["eval", "/nonexistent/bundle"]), "manifest.json");
+    assert_clean_error(&lemi(&["eval", b, "--cells", "9_0_0"]), "9_0_0");
+    assert_clean_error(
+        &lemi(&["eval", b, "--require-max-px", "nan"]),
+        "--require-max-px",
+    );
+    assert_clean_error(&lemi(&["eval", b, "--size", "0x10"]), "0x10");
+    assert_clean_error(&lemi(&["eval", b, "--fov", "200"]), "--fov");
+    // a damaged cell file
+    let cell = bundle.join("cells/0_0_0.lemicell");
+    let mut bytes = std::fs::read(&cell).unwrap();
+    let n = bytes.len();
+    bytes[n / 2] ^= 0x55;
+    std::fs::write(&cell, &bytes).unwrap();
+    assert_clean_error(&lemi(&quick), "0_0_0.lemicell");
+}
