@@ -47,6 +47,7 @@ fn params() -> BakeParams {
         output_width: None,
         micro_grid: 8,
         micro_threshold: 0.6,
+        layering: Default::default(),
     }
 }
 

@@ -364,6 +364,7 @@ fn params(faces: &[Face]) -> BakeParams {
         output_width: Some(RES),
         micro_grid: 8,
         micro_threshold: 0.6,
+        layering: Default::default(),
     }
 }
 

@@ -238,6 +238,7 @@ pub fn run(args: Args) -> Result<()> {
         output_width: width,
         micro_grid: args.micro_grid,
         micro_threshold: args.micro_threshold,
+        layering: Default::default(),
     };
     lemi_bake::validate_params(&params)?;
     let mut warnings = Vec::new();

@@ -31,6 +31,30 @@ pub enum LayerTarget {
     NearField(f64),
 }
 
+/// How the layers of a face are placed and recorded: the far-field strategy of a layered bundle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Layering {
+    /// lemi: the optimal placement of GI 2002 / TR-186-2-02-04 (one-texel spacing, parallax
+    /// ranges), conservative recording with shared clip borders, gap filling.
+    #[default]
+    Optimal,
+    /// A conventional cube environment map: one layer per face, the near field where one layer
+    /// puts it (`target` is ignored).
+    Single,
+    /// Schaufler's layered impostors (1998): the optimal placement's number of layers, spaced
+    /// uniformly in depth between the near field and the farthest scene point, their depth ranges
+    /// overlapping by `overlap` (a fraction of a slab's depth, on each side), ordinary
+    /// (centre-sampled) rasterization, no gap filling.
+    Equidistant { overlap: f64 },
+}
+
+impl Layering {
+    pub fn is_optimal(&self) -> bool {
+        *self == Layering::Optimal
+    }
+}
+
 /// Every parameter that changes what a cell contains. Two bakes with equal parameters and scene
 /// fingerprint produce interchangeable cells (this is what resuming and merging check).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -53,6 +77,10 @@ pub struct BakeParams {
     pub micro_grid: u32,
     /// Minimum opaque fraction while growing a micro-texture.
     pub micro_threshold: f64,
+    /// How the layers are placed and recorded (absent in the file: [`Layering::Optimal`], so the
+    /// parameters and hash of existing bundles are unchanged).
+    #[serde(default, skip_serializing_if = "Layering::is_optimal")]
+    pub layering: Layering,
 }
 
 impl BakeParams {

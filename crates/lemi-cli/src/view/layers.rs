@@ -184,6 +184,7 @@ mod tests {
             output_width: None,
             micro_grid: 8,
             micro_threshold: 0.6,
+            layering: Default::default(),
         }
     }
 
