@@ -18,10 +18,10 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_core::camera::View;
 use lemi_gpu::{
-    BackendChoice, Gpu, GpuMaterials, GpuScene, ImpostorRenderer, RenderOptions, Renderer,
-    UploadOptions,
+    BackendChoice, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions,
 };
-use lemi_runtime::{StallPolicy, Streamer, StreamerOptions};
+use lemi_runtime::{StallPolicy, StreamerOptions};
+use lemi_strategy::{FrameRequest, StrategyContext};
 
 use crate::walk::{auto_path, write_csv, write_plot, CameraPath, FrameRecord, Mode, Summary};
 
@@ -80,6 +80,10 @@ pub struct Args {
     /// The scene, if it moved since the bake (checked against the bundle's fingerprint).
     #[arg(long = "scene", value_name = "SCENE")]
     pub scene_override: Vec<String>,
+    /// Far-field strategy: lemi, cubemap or equidistant (the strategy the bundle was baked for;
+    /// default), warp or dynamic (built at run time from the bundle's cells and near lists).
+    #[arg(long)]
+    pub strategy: Option<String>,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -159,21 +163,21 @@ pub fn run(args: Args) -> Result<()> {
         },
         ..Default::default()
     };
-    let mut streamer = Streamer::new(
-        gpu.clone(),
-        manifest.clone(),
-        &args.bundle,
-        scene.clone(),
-        materials.clone(),
-        options,
-    )?;
-    let impostor_renderer = ImpostorRenderer::new(&gpu)?;
+    let ctx = StrategyContext {
+        gpu: gpu.clone(),
+        bundle: args.bundle.clone(),
+        manifest: manifest.clone(),
+        scene: scene.clone(),
+        materials: materials.clone(),
+    };
+    let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
+    let mut strategy = crate::strategy::open(&ctx, kind, options)?;
     let renderer = Renderer::new(&gpu)?;
     let render_options = RenderOptions {
         clear: [150, 190, 235, 255],
         ..Default::default()
     };
-    // All geometry: for the comparison replay and for fallback frames.
+    // All geometry: for the comparison replay.
     let full = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
         .context("uploading the scene for the geometry replay")?;
     let total_triangles = scene.triangle_count();
@@ -191,7 +195,7 @@ pub fn run(args: Args) -> Result<()> {
     );
     if let Some((_, _, first)) = frames.first() {
         bar.set_message("preloading the first cells");
-        streamer
+        strategy
             .preload(first.eye, first.velocity, Duration::from_secs(60))
             .context("preloading the first cells")?;
     }
@@ -200,6 +204,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut warnings = Vec::new();
     let mut slow_frames = 0u64;
     let mut last_cell: Option<String> = None;
+    let mut regenerations = 0u64;
     let start = Instant::now();
     let t0 = frames.first().map(|f| f.1).unwrap_or(0.0);
     for (index, t, pose) in &frames {
@@ -212,43 +217,40 @@ pub fn run(args: Args) -> Result<()> {
         }
         let view = camera_view(pose, fov_y, w, h)?;
         let t_frame = Instant::now();
-        let state = streamer.frame(pose.eye, pose.velocity, dt);
-        warnings.extend(state.warnings.iter().cloned());
-        let cell = state.current_cell.clone();
-        let switch = *index > 0 && cell != last_cell;
-        last_cell = cell.clone();
-        let (frame, near, quads, fallback) = match state.ready {
-            Some(c) => (
-                impostor_renderer
-                    .render(c, &view, &render_options)
-                    .context("rendering an impostor frame")?,
-                c.near_triangles(),
-                c.quad_count() as u64,
-                false,
-            ),
-            None => (
-                renderer
-                    .render(&full, &view, &render_options)
-                    .context("rendering a fallback frame")?,
-                total_triangles,
-                0,
-                true,
-            ),
-        };
+        let f = strategy
+            .frame(&FrameRequest {
+                eye: pose.eye,
+                velocity: pose.velocity,
+                dt,
+                view: &view,
+                options: &render_options,
+                measure_error: false,
+            })
+            .with_context(|| format!("rendering frame {index} ({kind})"))?;
+        let cpu_ms = 1e3 * t_frame.elapsed().as_secs_f64();
+        warnings.extend(f.warnings.iter().cloned());
+        let switch = *index > 0 && f.cell != last_cell;
+        last_cell = f.cell.clone();
+        regenerations += f.regenerations;
+        let frame = f.frame;
         let record = FrameRecord {
             frame: *index,
             t: *t,
             mode: Mode::Impostor,
-            cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
+            cpu_ms,
             gpu_ms: None,
-            near_triangles: near,
-            impostor_quads: quads,
-            total_triangles: if fallback { total_triangles } else { near },
-            cell,
+            near_triangles: f.near_triangles,
+            impostor_quads: f.far_primitives,
+            total_triangles: if f.fallback {
+                total_triangles
+            } else {
+                f.near_triangles
+            },
+            cell: f.cell,
             cell_switch: switch,
-            stalled: state.stalled,
-            cache_bytes: state.cache_bytes,
-            fallback,
+            stalled: f.stalled,
+            cache_bytes: f.cache_bytes,
+            fallback: f.fallback,
         };
         if let Some(d) = &args.frames_dir {
             if index % args.every == 0 {
@@ -266,8 +268,8 @@ pub fn run(args: Args) -> Result<()> {
             last_cell.as_deref().unwrap_or("-")
         ));
     }
-    let stream_stats = streamer.stats();
-    drop(streamer);
+    let report = strategy.report();
+    drop(strategy);
     let mut geometry = Vec::new();
     if !args.no_geometry {
         for (index, t, pose) in &frames {
@@ -307,9 +309,13 @@ pub fn run(args: Args) -> Result<()> {
     v["size"] = serde_json::json!([w, h]);
     v["fov_x_deg"] = serde_json::json!(fov_x);
     v["adapter"] = serde_json::json!(gpu.describe());
-    v["loads"] = serde_json::json!(stream_stats.loads);
-    v["evictions"] = serde_json::json!(stream_stats.evictions);
-    v["peak_cache_bytes"] = serde_json::json!(stream_stats.peak_cache_bytes);
+    v["strategy"] = serde_json::json!(kind.name());
+    v["loads"] = serde_json::json!(report.loads);
+    v["evictions"] = serde_json::json!(report.evictions);
+    v["peak_cache_bytes"] = serde_json::json!(report.peak_bytes);
+    v["regenerations"] = serde_json::json!(regenerations);
+    v["prepare_seconds"] = serde_json::json!(report.prepare_seconds);
+    v["texture_bytes_per_cell"] = serde_json::json!(report.texture_bytes_per_cell);
     v["warnings"] = serde_json::json!(warnings);
     v["out"] = serde_json::json!(out);
     let summary_path = out.join("summary.json");
@@ -332,14 +338,16 @@ pub fn run(args: Args) -> Result<()> {
         path.duration()
     );
     println!(
-        "impostors  median {}, p99 {}; {} cell switches, {} stalls, {} loads, {} evictions, peak cache {:.1} MB",
+        "{:<10} median {}, p99 {}; {} cell switches, {} stalls, {} loads, {} evictions, {} regenerations, peak cache {:.1} MB",
+        kind.name(),
         ms(summary.impostor_median_ms),
         ms(summary.impostor_p99_ms),
         summary.cell_switches,
         summary.stalls,
-        stream_stats.loads,
-        stream_stats.evictions,
-        stream_stats.peak_cache_bytes as f64 / 1e6
+        report.loads,
+        report.evictions,
+        regenerations,
+        report.peak_bytes as f64 / 1e6
     );
     if !args.no_geometry {
         println!(

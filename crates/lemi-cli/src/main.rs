@@ -11,6 +11,7 @@ mod cmd_render;
 mod cmd_view;
 mod cmd_walk;
 mod load;
+mod strategy;
 mod walk;
 
 use clap::{Parser, Subcommand};

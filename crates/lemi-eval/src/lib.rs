@@ -30,7 +30,10 @@ pub use report::{
     severity_cmp, verdict, write_report, Aggregate, BundleResult, CellResult, ErrorSummary,
     ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
-pub use run::{evaluate_bundle, output_view, EvalOptions, EvalRun, ViewpointSet};
+pub use run::{
+    evaluate_bundle, evaluate_with, output_view, CellRenderer, EvalOptions, EvalRun, RenderedView,
+    ViewpointSet,
+};
 pub use stats::{Histogram, PixelErrorStats};
 
 /// Everything that can go wrong while evaluating or writing a report.

@@ -12,12 +12,12 @@ use std::sync::Arc;
 use glam::DVec3;
 use lemi_bake::Baker;
 use lemi_core::bundle::{CellFile, Manifest};
-use lemi_core::camera::Camera;
+use lemi_core::camera::{Camera, View};
 use lemi_core::cell::{eval_directions, eval_viewpoints, ViewCell};
 use lemi_core::parallax_error::{pixel_errors, LayerDepths};
 use lemi_core::Scene;
 use lemi_gpu::{
-    Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions, Renderer,
+    Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions, Renderer,
     UploadOptions,
 };
 
@@ -170,6 +170,92 @@ fn slab_tolerance(file: &CellFile, cell: &ViewCell, r: f32) -> f32 {
     diag as f32
 }
 
+/// What the evaluation asks of the images it judges: one view of one cell at a time.
+pub trait CellRenderer {
+    /// Gets ready to render views of `cell` (called once per cell, before its views).
+    fn begin_cell(&mut self, cell: &ViewCell) -> Result<(), EvalError>;
+    /// Renders the current cell from `view` with the eye at `eye`.
+    fn render(&mut self, view: &View, eye: DVec3) -> Result<RenderedView, EvalError>;
+    /// The depth a pixel may show beyond the farthest reference depth `far` of its 3×3
+    /// neighbourhood before it counts as a crack ([`crate::image_metrics::crack_pixels`]);
+    /// `f32::INFINITY`: only pixels showing background where the reference has a surface.
+    fn crack_tolerance(&self, far: f32) -> f32;
+}
+
+/// One rendered view and its measured geometric error.
+pub struct RenderedView {
+    pub frame: Frame,
+    /// Per pixel (row-major): the geometric error in output pixels, NaN where it does not apply
+    /// or was not measured.
+    pub error_px: Vec<f32>,
+    /// Per pixel: whether it shows a gap-filled texel (layered impostors), if known.
+    pub gap_filled: Option<Vec<bool>>,
+}
+
+/// The layered impostors of a bundle's cells, with their geometric error measured against the
+/// layers' per-texel depths, re-recorded for every cell.
+struct LayeredCells<'a> {
+    gpu: &'a Gpu,
+    bundle: &'a Path,
+    manifest: &'a Manifest,
+    scene: &'a Scene,
+    materials: Arc<GpuMaterials>,
+    renderer: ImpostorRenderer,
+    baker: Baker<'a>,
+    render_options: RenderOptions,
+    current: Option<(ViewCell, CellFile, ImpostorCell, LayerDepths)>,
+}
+
+impl CellRenderer for LayeredCells<'_> {
+    fn begin_cell(&mut self, cell: &ViewCell) -> Result<(), EvalError> {
+        let id = cell.id();
+        let gpu_err = |what: String| move |e: lemi_gpu::GpuError| err(format!("{what}: {e}"));
+        self.current = None;
+        let file = read_cell(self.bundle, self.manifest, &id)?;
+        let macros = file
+            .decode_macros()
+            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        let gpu_cell = ImpostorCell::upload(
+            self.gpu,
+            self.materials.clone(),
+            self.scene,
+            &file.near,
+            &file.header.quads,
+            &macros,
+        )
+        .map_err(gpu_err(format!("uploading cell {id}")))?;
+        let depths = self
+            .baker
+            .record_depths(cell)
+            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        self.current = Some((*cell, file, gpu_cell, depths));
+        Ok(())
+    }
+
+    fn render(&mut self, view: &View, _eye: DVec3) -> Result<RenderedView, EvalError> {
+        let Some((_, _, gpu_cell, depths)) = &self.current else {
+            return Err(err("no cell to render (begin_cell was not called)"));
+        };
+        let frame = self
+            .renderer
+            .render(gpu_cell, view, &self.render_options)
+            .map_err(|e| err(format!("impostor render: {e}")))?;
+        let geometric = pixel_errors(view, &frame.depth, depths, 1e-4);
+        Ok(RenderedView {
+            frame,
+            error_px: geometric.error_px,
+            gap_filled: Some(geometric.gap_filled),
+        })
+    }
+
+    fn crack_tolerance(&self, far: f32) -> f32 {
+        match &self.current {
+            Some((cell, file, _, _)) => slab_tolerance(file, cell, far),
+            None => f32::INFINITY,
+        }
+    }
+}
+
 /// Evaluates the cells of a bundle. `progress(done, total, what)` is called before every view.
 pub fn evaluate_bundle(
     gpu: &Gpu,
@@ -177,6 +263,39 @@ pub fn evaluate_bundle(
     manifest: &Manifest,
     scene: &Scene,
     options: &EvalOptions,
+    progress: impl FnMut(usize, usize, &str),
+) -> Result<EvalRun, EvalError> {
+    let materials = Arc::new(
+        GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
+            .map_err(|e| err(format!("uploading materials: {e}")))?,
+    );
+    let mut cells = LayeredCells {
+        gpu,
+        bundle,
+        manifest,
+        scene,
+        materials,
+        renderer: ImpostorRenderer::new(gpu).map_err(|e| err(format!("impostor renderer: {e}")))?,
+        baker: Baker::new(gpu, scene, manifest.params.clone())
+            .map_err(|e| err(format!("preparing to re-record depths: {e}")))?,
+        render_options: RenderOptions {
+            clear: options.clear,
+            ..Default::default()
+        },
+        current: None,
+    };
+    evaluate_with(gpu, bundle, manifest, scene, options, &mut cells, progress)
+}
+
+/// Evaluates the cells of a bundle as `renderer` draws them (any far-field strategy): the same
+/// viewpoints, directions, output view and metrics as [`evaluate_bundle`].
+pub fn evaluate_with(
+    gpu: &Gpu,
+    bundle: &Path,
+    manifest: &Manifest,
+    scene: &Scene,
+    options: &EvalOptions,
+    renderer: &mut dyn CellRenderer,
     mut progress: impl FnMut(usize, usize, &str),
 ) -> Result<EvalRun, EvalError> {
     let ids: Vec<String> = match &options.cells {
@@ -197,16 +316,9 @@ pub fn evaluate_bundle(
         let what = what.to_string();
         move |e: lemi_gpu::GpuError| err(format!("{what}: {e}"))
     };
-    let materials = Arc::new(
-        GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
-            .map_err(gpu_err("uploading materials"))?,
-    );
     let full = GpuScene::upload(gpu, scene, &UploadOptions::default())
         .map_err(gpu_err("uploading the scene"))?;
     let reference_renderer = Renderer::new(gpu).map_err(gpu_err("reference renderer"))?;
-    let impostor_renderer = ImpostorRenderer::new(gpu).map_err(gpu_err("impostor renderer"))?;
-    let baker = Baker::new(gpu, scene, manifest.params.clone())
-        .map_err(|e| err(format!("preparing to re-record depths: {e}")))?;
     let render_options = RenderOptions {
         clear: options.clear,
         ..Default::default()
@@ -236,27 +348,8 @@ pub fn evaluate_bundle(
     let mut done = 0;
     for (cell, points) in &points_per_cell {
         let id = cell.id();
-        let file = read_cell(bundle, manifest, &id)?;
-        let macros = file
-            .decode_macros()
-            .map_err(|e| err(format!("cell {id}: {e}")))?;
-        let gpu_cell = ImpostorCell::upload(
-            gpu,
-            materials.clone(),
-            scene,
-            &file.near,
-            &file.header.quads,
-            &macros,
-        )
-        .map_err(gpu_err(&format!("uploading cell {id}")))?;
-        progress(
-            done,
-            total,
-            &format!("cell {id}: re-recording layer depths"),
-        );
-        let depths: LayerDepths = baker
-            .record_depths(cell)
-            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        progress(done, total, &format!("cell {id}: preparing"));
+        renderer.begin_cell(cell)?;
         let mut stats = PixelErrorStats::new();
         let mut own = PixelErrorStats::new();
         let mut gap = PixelErrorStats::new();
@@ -270,20 +363,27 @@ pub fn evaluate_bundle(
                 let reference = reference_renderer
                     .render(&full, &view, &render_options)
                     .map_err(gpu_err("reference render"))?;
-                let impostor = impostor_renderer
-                    .render(&gpu_cell, &view, &render_options)
-                    .map_err(gpu_err("impostor render"))?;
-                let geometric = pixel_errors(&view, &impostor.depth, &depths, 1e-4);
-                for (e, &g) in geometric.error_px.iter().zip(&geometric.gap_filled) {
-                    if g {
-                        gap.add(*e);
-                    } else {
-                        own.add(*e);
+                let rendered = renderer.render(&view, *eye)?;
+                match &rendered.gap_filled {
+                    Some(g) => {
+                        for (e, &g) in rendered.error_px.iter().zip(g) {
+                            if g {
+                                gap.add(*e);
+                            } else {
+                                own.add(*e);
+                            }
+                        }
+                    }
+                    None => {
+                        for e in &rendered.error_px {
+                            own.add(*e);
+                        }
                     }
                 }
+                let impostor = rendered.frame;
                 // A surface may legitimately move by its sub-pixel error, so at a depth edge the
                 // impostor may show the farther neighbour: allow the farthest reference depth of
-                // the 3×3 neighbourhood plus one slab there.
+                // the 3×3 neighbourhood plus the renderer's tolerance there.
                 let wi = w as usize;
                 let hi = h as usize;
                 let tol = |i: usize, r: f32| {
@@ -294,9 +394,9 @@ pub fn evaluate_bundle(
                             far = far.max(reference.depth[yy * wi + xx]);
                         }
                     }
-                    (far - r) + slab_tolerance(&file, cell, far)
+                    (far - r) + renderer.crack_tolerance(far)
                 };
-                let e = evaluate_view(&reference, &impostor, &geometric.error_px, &tol, ppd)?;
+                let e = evaluate_view(&reference, &impostor, &rendered.error_px, &tol, ppd)?;
                 stats.merge(&e.error);
                 let label = format!("{label}, looking {dname}");
                 let r = e.result(&id, &label, eye.to_array(), dir.to_array());

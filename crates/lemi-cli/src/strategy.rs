@@ -1,0 +1,44 @@
+//! `--strategy NAME` for `walk`, `eval` and `compare`: which far-field strategy draws a bundle.
+
+use anyhow::{bail, Result};
+use lemi_core::bundle::Manifest;
+use lemi_runtime::StreamerOptions;
+use lemi_strategy::layered::{bundle_strategy, LayeredStrategy};
+use lemi_strategy::{Strategy, StrategyContext, StrategyKind};
+
+/// The strategy to run on a bundle: `name` if given (checked against what the bundle can serve),
+/// else the strategy the bundle was baked for.
+pub fn kind_for(manifest: &Manifest, name: Option<&str>) -> Result<StrategyKind> {
+    let baked = bundle_strategy(manifest);
+    let Some(name) = name else {
+        return Ok(baked);
+    };
+    let kind = StrategyKind::parse(name).map_err(|e| anyhow::anyhow!("--strategy: {e}"))?;
+    if kind.is_layered() && kind != baked {
+        bail!(
+            "--strategy {kind}: this bundle was baked for `{baked}`; bake one for `{kind}` with `lemi bake --strategy {kind}`"
+        );
+    }
+    if !kind.is_layered() && baked != StrategyKind::Lemi {
+        bail!(
+            "--strategy {kind} takes its cells and near lists from a `lemi` bundle; this one was baked for `{baked}`"
+        );
+    }
+    Ok(kind)
+}
+
+/// Opens strategy `kind` on the bundle of `ctx`.
+pub fn open(
+    ctx: &StrategyContext,
+    kind: StrategyKind,
+    streamer: StreamerOptions,
+) -> Result<Box<dyn Strategy>> {
+    Ok(match kind {
+        StrategyKind::Lemi | StrategyKind::Cubemap | StrategyKind::Equidistant => {
+            Box::new(LayeredStrategy::new(ctx, kind, streamer)?)
+        }
+        StrategyKind::Warp | StrategyKind::Dynamic => {
+            bail!("--strategy {kind} is not available yet")
+        }
+    })
+}

@@ -1,0 +1,78 @@
+//! Evaluating any strategy with `lemi eval`'s viewpoints and metrics: [`StrategyCells`] adapts a
+//! [`Strategy`] to [`lemi_eval::CellRenderer`].
+//!
+//! Layered bundles are evaluated by [`lemi_eval::evaluate_bundle`], which re-records the layers'
+//! depths to measure the error of every impostor texel and judges cracks against one slab. The
+//! other strategies measure their own per-pixel error ([`crate::FrameRequest::measure_error`]);
+//! their cracks are the pixels that show background where the reference shows a surface (they
+//! have no slabs to bound a see-through depth by).
+
+use glam::DVec3;
+use lemi_core::camera::View;
+use lemi_core::cell::ViewCell;
+use lemi_eval::{CellRenderer, EvalError, RenderedView};
+use lemi_gpu::RenderOptions;
+
+use crate::{FrameRequest, Strategy};
+
+/// A strategy as the evaluation's renderer: every view is one frame with the error measured.
+pub struct StrategyCells<'a> {
+    pub strategy: &'a mut dyn Strategy,
+    pub options: RenderOptions,
+    /// Impostors regenerated or far fields prepared over the evaluation.
+    pub regenerations: u64,
+    /// Views whose strategy frame fell back to all geometry.
+    pub fallback_views: u64,
+}
+
+impl<'a> StrategyCells<'a> {
+    pub fn new(strategy: &'a mut dyn Strategy, options: RenderOptions) -> StrategyCells<'a> {
+        StrategyCells {
+            strategy,
+            options,
+            regenerations: 0,
+            fallback_views: 0,
+        }
+    }
+}
+
+impl CellRenderer for StrategyCells<'_> {
+    fn begin_cell(&mut self, cell: &ViewCell) -> Result<(), EvalError> {
+        self.strategy
+            .preload(
+                cell.center,
+                DVec3::ZERO,
+                std::time::Duration::from_secs(600),
+            )
+            .map_err(|e| EvalError::Job(format!("preparing cell {}: {e}", cell.id())))
+    }
+
+    fn render(&mut self, view: &View, eye: DVec3) -> Result<RenderedView, EvalError> {
+        let request = FrameRequest {
+            eye,
+            velocity: DVec3::ZERO,
+            dt: 1.0 / 30.0,
+            view,
+            options: &self.options,
+            measure_error: true,
+        };
+        let f = self
+            .strategy
+            .frame(&request)
+            .map_err(|e| EvalError::Job(format!("{} frame: {e}", self.strategy.kind())))?;
+        self.regenerations += f.regenerations;
+        if f.fallback {
+            self.fallback_views += 1;
+        }
+        let n = f.frame.rgba.len() / 4;
+        Ok(RenderedView {
+            frame: f.frame,
+            error_px: f.error_px.unwrap_or_else(|| vec![f32::NAN; n]),
+            gap_filled: None,
+        })
+    }
+
+    fn crack_tolerance(&self, _far: f32) -> f32 {
+        f32::INFINITY
+    }
+}
