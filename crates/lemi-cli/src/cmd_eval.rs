@@ -9,7 +9,11 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_eval::{EvalOptions, ViewpointSet};
-use lemi_gpu::{BackendChoice, Gpu};
+use std::sync::Arc;
+
+use lemi_gpu::{BackendChoice, Gpu, GpuMaterials, RenderOptions};
+use lemi_strategy::eval::StrategyCells;
+use lemi_strategy::StrategyContext;
 
 /// Measure how far the impostor images of a bundle are from the real geometry.
 #[derive(clap::Args)]
@@ -51,6 +55,10 @@ pub struct Args {
     /// Fail (exit status 2) when any view has crack pixels.
     #[arg(long)]
     pub require_no_cracks: bool,
+    /// Far-field strategy to judge: the one the bundle was baked for (default), or warp or
+    /// dynamic (built at run time from a `lemi` bundle's cells and near lists).
+    #[arg(long)]
+    pub strategy: Option<String>,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -104,7 +112,8 @@ pub fn run(args: Args) -> Result<()> {
         fov_x_deg: args.fov,
         ..Default::default()
     };
-    let gpu = Gpu::new(backend)?;
+    let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
+    let gpu = Arc::new(Gpu::new(backend)?);
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
@@ -115,19 +124,45 @@ pub fn run(args: Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
+    let progress = |done: usize, total: usize, what: &str| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+        bar.set_message(what.to_string());
+    };
     let t = std::time::Instant::now();
-    let run = lemi_eval::evaluate_bundle(
-        &gpu,
-        &args.bundle,
-        &manifest,
-        &scene,
-        &options,
-        |done, total, what| {
-            bar.set_length(total as u64);
-            bar.set_position(done as u64);
-            bar.set_message(what.to_string());
-        },
-    )?;
+    let run = if kind.is_layered() {
+        lemi_eval::evaluate_bundle(&gpu, &args.bundle, &manifest, &scene, &options, progress)?
+    } else {
+        let scene = Arc::new(scene);
+        let materials = Arc::new(
+            GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
+                .context("uploading the scene's materials")?,
+        );
+        let ctx = StrategyContext {
+            gpu: gpu.clone(),
+            bundle: args.bundle.clone(),
+            manifest: manifest.clone(),
+            scene: scene.clone(),
+            materials,
+        };
+        let mut strategy = crate::strategy::open(&ctx, kind, Default::default())?;
+        let mut cells = StrategyCells::new(
+            strategy.as_mut(),
+            RenderOptions {
+                clear: options.clear,
+                ..Default::default()
+            },
+        );
+        lemi_eval::evaluate_with(
+            &gpu,
+            &args.bundle,
+            &manifest,
+            &scene,
+            &options,
+            &mut cells,
+            progress,
+        )?
+    };
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();
     let dir = args
@@ -135,18 +170,26 @@ pub fn run(args: Args) -> Result<()> {
         .clone()
         .unwrap_or_else(|| args.bundle.join("eval"));
     let index = lemi_eval::write_report(&dir, &run.result, &run.worst)?;
-    let verdict = format!(
-        "{}; placement (layers' own texels) max {:.2} px, gap-filled texels max {:.2} px ({:.2} % of impostor pixels)",
-        lemi_eval::verdict(&run.result),
-        run.placement.max(),
-        run.gap_filled.max(),
-        100.0 * run.gap_filled.count() as f64
-            / (run.placement.count() + run.gap_filled.count()).max(1) as f64
-    );
+    let verdict = if kind.is_layered() {
+        format!(
+            "{}; placement (layers' own texels) max {:.2} px, gap-filled texels max {:.2} px ({:.2} % of impostor pixels)",
+            lemi_eval::verdict(&run.result),
+            run.placement.max(),
+            run.gap_filled.max(),
+            100.0 * run.gap_filled.count() as f64
+                / (run.placement.count() + run.gap_filled.count()).max(1) as f64
+        )
+    } else {
+        format!(
+            "{} (strategy {kind}: error as the strategy measures it, cracks = background where the reference has a surface)",
+            lemi_eval::verdict(&run.result)
+        )
+    };
     let s = &run.result.summary;
     if args.json {
         let mut v = serde_json::to_value(&run.result)?;
         v["verdict"] = serde_json::Value::String(verdict.clone());
+        v["strategy"] = serde_json::json!(kind.name());
         v["placement_max_error_px"] = serde_json::json!(run.placement.max());
         v["placement_p99_error_px"] = serde_json::json!(run.placement.p99());
         v["gap_filled_pixels"] = serde_json::json!(run.gap_filled.count());
@@ -156,7 +199,7 @@ pub fn run(args: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         let (w, h, fov) = lemi_eval::output_view(&manifest, &options);
-        println!("lemi eval");
+        println!("lemi eval ({kind})");
         println!("adapter    {}", gpu.describe());
         println!(
             "views      {} in {} cells at {w}x{h}, {fov}° horizontal, in {seconds:.1} s ({:.2} s per view)",

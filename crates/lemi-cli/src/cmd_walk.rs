@@ -315,6 +315,7 @@ pub fn run(args: Args) -> Result<()> {
     v["peak_cache_bytes"] = serde_json::json!(report.peak_bytes);
     v["regenerations"] = serde_json::json!(regenerations);
     v["prepare_seconds"] = serde_json::json!(report.prepare_seconds);
+    v["prepared_cells"] = serde_json::json!(report.prepared_cells);
     v["texture_bytes_per_cell"] = serde_json::json!(report.texture_bytes_per_cell);
     v["warnings"] = serde_json::json!(warnings);
     v["out"] = serde_json::json!(out);

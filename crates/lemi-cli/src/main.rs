@@ -3,6 +3,7 @@
 
 mod bundle_view;
 mod cmd_bake;
+mod cmd_compare;
 mod cmd_demo;
 mod cmd_eval;
 mod cmd_info;
@@ -42,6 +43,8 @@ enum Command {
     View(cmd_view::Args),
     /// Compute the layer placement of a view cell (the error metric).
     Layers(cmd_layers::Args),
+    /// Run every far-field strategy (lemi, cubemap, equidistant, warp, dynamic) on one scene: tables, plots.
+    Compare(cmd_compare::Args),
 }
 
 fn main() {
@@ -55,6 +58,7 @@ fn main() {
         Command::Layers(a) => cmd_layers::run(a),
         Command::Walk(a) => cmd_walk::run(a),
         Command::View(a) => cmd_view::run(a),
+        Command::Compare(a) => cmd_compare::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", error_chain(&e));

@@ -13,4 +13,4 @@ pub mod record;
 
 pub use path::{auto_path, CameraPath, Pose};
 pub use plot::write_plot;
-pub use record::{write_csv, FrameRecord, Mode, Summary};
+pub use record::{write_csv, FrameRecord, Mode, Summary, CSV_COLUMNS};
