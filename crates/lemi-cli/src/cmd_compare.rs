@@ -88,6 +88,9 @@ pub struct Args {
     /// Evaluate only the centre and corners of each cell.
     #[arg(long)]
     pub corners_only: bool,
+    /// Evaluate only these cells (comma-separated ids; default: every baked cell).
+    #[arg(long)]
+    pub eval_cells: Option<String>,
     /// Evaluation image size (default: the bake's output view).
     #[arg(long)]
     pub eval_size: Option<String>,
@@ -321,6 +324,9 @@ pub fn run(args: Args) -> Result<()> {
         ];
         if args.corners_only {
             a.push(s("--corners-only"));
+        }
+        if let Some(c) = &args.eval_cells {
+            a.extend([s("--cells"), c.clone()]);
         }
         if let Some(sz) = &args.eval_size {
             a.extend([s("--size"), sz.clone()]);
