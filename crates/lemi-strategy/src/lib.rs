@@ -19,6 +19,7 @@
 
 pub mod eval;
 pub mod layered;
+pub mod warp;
 
 use std::path::PathBuf;
 use std::sync::Arc;
