@@ -2,15 +2,21 @@
 //! classification → crack-free GPU recording of every (face, layer) → compression → cell file.
 //!
 //! - **placement**: per baked face, `lemi_core::placement::place_env_layers` for the cell's extent
-//!   along and across the face axis;
+//!   along and across the face axis, then shaped by `BakeParams::layering` ([`layering`]: the
+//!   optimal placement, one layer, or Schaufler's equidistant overlapping slabs);
 //! - **classification**: `lemi_core::classify`: the near list and, per (face, slab), the bin of
-//!   triangles overlapping it, so recording a layer submits only its bin;
+//!   triangles overlapping the depth range the layer records, so recording a layer submits only
+//!   its bin;
 //! - **recording**: each bin's triangles are clipped to the slab on the CPU (canonical cuts, so a
 //!   border's cut is bit-identical in both layers), then drawn with conservative coverage by
 //!   [`lemi_gpu::LayerRecorder`]; the cut edges' texels are flagged as clip-border texels
 //!   ([`crate::clip_border`]);
 //! - **compression**: `lemi_core::compress::compress_cell` (gap fill, hidden texels, micro-textures,
 //!   macro packing), then PNG per macro-texture;
+//! - the equidistant layering (Schaufler 1998) records with ordinary centre-sampled rasterization
+//!   ([`lemi_gpu::recorder::Coverage::CentreSampled`]), flags no clip-border texels, does not close
+//!   the near-field seam and skips gap filling; everything else is the same pipeline, so sizes
+//!   compare fairly;
 //! - the result is a [`CellFile`]: quads with world-space corners, PNG macro-textures, near list,
 //!   statistics (GI 2002 Table 2 and more).
 
@@ -19,22 +25,25 @@ use std::time::Instant;
 
 use glam::DVec3;
 use lemi_core::bundle::{
-    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, LayerTarget, MacroInfo,
-    Quad,
+    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, LayerTarget, Layering,
+    MacroInfo, Quad,
 };
 use lemi_core::cell::ViewCell;
-use lemi_core::classify::{classify, TriRef, TriangleBounds};
+use lemi_core::classify::{classify_slabs, TriRef, TriangleBounds};
 use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::compress::{
     compress_cell, CompressOptions, FaceLayers, LayerImage, MicroTextureOptions,
 };
-use lemi_core::placement::{place_env_layers, Axis, EnvParams, Placement, Target};
-use lemi_core::{Face, Scene};
+use lemi_core::placement::Placement;
+use lemi_core::{Aabb, Face, Scene};
+use lemi_gpu::recorder::Coverage;
 use lemi_gpu::{Gpu, GpuMaterials, LayerRecorder, Lighting, MaterialRun};
 use rayon::prelude::*;
 
 use crate::clip_border::mark_clip_borders;
 use crate::BakeError;
+
+pub use crate::layering::{plan_cell, CellPlan, FacePlan};
 
 /// What a baker needs once per scene: the scene, its triangles in f64, its materials on the GPU and
 /// the layer recorder.
@@ -78,33 +87,47 @@ impl std::fmt::Display for Stage {
     }
 }
 
-/// The face axis as a placement axis.
-fn axis_of(face: Face) -> Axis {
-    match face {
-        Face::PosX | Face::NegX => Axis::X,
-        Face::PosY | Face::NegY => Axis::Y,
-        Face::PosZ | Face::NegZ => Axis::Z,
-    }
+/// The placement of every baked face of `cell`, for `params.layering` ([`layering`]). The
+/// equidistant layering needs the scene's bounds: use [`place_cell_in`] (this is an error for it).
+pub fn place_cell(params: &BakeParams, cell: &ViewCell) -> Result<Vec<Placement>, BakeError> {
+    Ok(plan_cell(params, cell, None)?.placements())
 }
 
-/// The placement of every baked face of `cell`.
-pub fn place_cell(params: &BakeParams, cell: &ViewCell) -> Result<Vec<Placement>, BakeError> {
-    let target = match params.target {
-        LayerTarget::Layers(n) => Target::Layers(n as usize),
-        LayerTarget::NearField(d) => Target::NearField(d),
-    };
-    params
-        .faces
-        .iter()
-        .map(|&face| {
-            let env =
-                EnvParams::box_face(cell.half, axis_of(face), params.resolution, params.alpha);
-            place_env_layers(&env, target).map_err(|e| BakeError::Cell {
-                cell: cell.id(),
-                message: format!("placing the layers of face {face}: {e}"),
-            })
-        })
-        .collect()
+/// [`place_cell`] for a scene with bounding box `scene_bounds` (what the bake places, for every
+/// layering).
+pub fn place_cell_in(
+    params: &BakeParams,
+    cell: &ViewCell,
+    scene_bounds: &Aabb,
+) -> Result<Vec<Placement>, BakeError> {
+    Ok(plan_cell(params, cell, Some(scene_bounds))?.placements())
+}
+
+/// How the layers of `layering` are recorded and compressed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Recording {
+    coverage: Coverage,
+    /// Flag clip-border texels and close the near-field seam (the crack-free recording of the
+    /// optimal bake).
+    crack_free: bool,
+    gap_fill: bool,
+}
+
+impl Recording {
+    fn of(layering: Layering) -> Recording {
+        match layering {
+            Layering::Optimal | Layering::Single => Recording {
+                coverage: Coverage::Conservative,
+                crack_free: true,
+                gap_fill: true,
+            },
+            Layering::Equidistant { .. } => Recording {
+                coverage: Coverage::CentreSampled,
+                crack_free: false,
+                gap_fill: false,
+            },
+        }
+    }
 }
 
 impl<'a> Baker<'a> {
@@ -148,25 +171,17 @@ impl<'a> Baker<'a> {
 
         on_stage(&Stage::Placement);
         let t = Instant::now();
-        let placements = place_cell(params, cell)?;
-        let near_field = placements
-            .iter()
-            .map(|p| p.near_field)
-            .fold(0.0f64, f64::max);
+        let plan = self.plan(cell)?;
+        let near_field = plan.near_field;
         seconds.push(("placement".into(), t.elapsed().as_secs_f64()));
 
         on_stage(&Stage::Classify);
         let t = Instant::now();
-        let borders: Vec<Vec<f64>> = placements
-            .iter()
-            .map(|p| p.layers.iter().map(|l| l.near_border).collect())
-            .collect();
-        let class = classify(&self.tris, center, near_field, &params.faces, &borders);
+        let class = classify_slabs(&self.tris, center, near_field, &params.faces, &plan.slabs());
         seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
 
         let t_record = Instant::now();
-        let rec =
-            self.record_layers(cell, &placements, &class, near_field, false, &mut on_stage)?;
+        let rec = self.record_layers(cell, &plan, &class, false, &mut on_stage)?;
         let mut faces = rec.faces;
         let opaque_recorded = rec.opaque_recorded;
         let record_s = t_record.elapsed().as_secs_f64();
@@ -176,6 +191,7 @@ impl<'a> Baker<'a> {
         on_stage(&Stage::Compress);
         let t = Instant::now();
         let options = CompressOptions {
+            gap_fill: Recording::of(params.layering).gap_fill,
             micro: MicroTextureOptions {
                 cell_size: params.micro_grid,
                 threshold: params.micro_threshold,
@@ -240,10 +256,12 @@ impl<'a> Baker<'a> {
             png_bytes: pngs.iter().map(|p| p.len() as u64).sum(),
             seconds,
         };
-        let layers = placements
+        let layers = plan
+            .faces
             .iter()
-            .map(|p| {
-                p.layers
+            .map(|f| {
+                f.placement
+                    .layers
                     .iter()
                     .map(|l| LayerInfo {
                         distance: l.distance,
@@ -275,37 +293,37 @@ impl<'a> Baker<'a> {
         })
     }
 
+    /// The layers of `cell` and what each records, for this baker's parameters and scene (what
+    /// [`Baker::bake`] and [`Baker::record_depths`] use).
+    pub fn plan(&self, cell: &ViewCell) -> Result<CellPlan, BakeError> {
+        plan_cell(&self.params, cell, Some(&self.scene.bounds))
+    }
+
     /// Records the layers of `cell` again and keeps only their per-texel depths along the face
     /// axis (for measuring the geometric error of a baked cell, `lemi_core::parallax_error`). The
-    /// result is what the bake of the same cell recorded, before compression.
+    /// result is what the bake of the same cell recorded, before compression (same layering, same
+    /// layers, same recorded depth ranges and coverage).
     pub fn record_depths(
         &self,
         cell: &ViewCell,
     ) -> Result<lemi_core::parallax_error::LayerDepths, BakeError> {
-        let placements = place_cell(&self.params, cell)?;
-        let near_field = placements
-            .iter()
-            .map(|p| p.near_field)
-            .fold(0.0f64, f64::max);
-        let borders: Vec<Vec<f64>> = placements
-            .iter()
-            .map(|p| p.layers.iter().map(|l| l.near_border).collect())
-            .collect();
-        let class = classify(
+        let plan = self.plan(cell)?;
+        let class = classify_slabs(
             &self.tris,
             cell.center,
-            near_field,
+            plan.near_field,
             &self.params.faces,
-            &borders,
+            &plan.slabs(),
         );
-        let rec = self.record_layers(cell, &placements, &class, near_field, true, &mut |_| {})?;
+        let rec = self.record_layers(cell, &plan, &class, true, &mut |_| {})?;
         Ok(lemi_core::parallax_error::LayerDepths {
             center: cell.center,
             res: self.params.resolution,
             faces: self.params.faces.clone(),
-            distances: placements
+            distances: plan
+                .faces
                 .iter()
-                .map(|p| p.layers.iter().map(|l| l.distance).collect())
+                .map(|f| f.placement.layers.iter().map(|l| l.distance).collect())
                 .collect(),
             depth: rec.depths,
         })
@@ -316,9 +334,8 @@ impl<'a> Baker<'a> {
     fn record_layers(
         &self,
         cell: &ViewCell,
-        placements: &[Placement],
+        plan: &CellPlan,
         class: &lemi_core::classify::Classification,
-        near_field: f64,
         depths_only: bool,
         on_stage: &mut dyn FnMut(&Stage),
     ) -> Result<Recorded, BakeError> {
@@ -328,6 +345,8 @@ impl<'a> Baker<'a> {
         };
         let center = cell.center;
         let res = self.params.resolution;
+        let near_field = plan.near_field;
+        let recording = Recording::of(self.params.layering);
         let mut out = Recorded {
             faces: Vec::new(),
             depths: Vec::new(),
@@ -335,37 +354,34 @@ impl<'a> Baker<'a> {
             near_seam_texels: 0,
             clip_seconds: 0.0,
         };
-        for (slot, (&face, placement)) in self.params.faces.iter().zip(placements).enumerate() {
+        for (slot, face_plan) in plan.faces.iter().enumerate() {
+            let face = face_plan.face;
+            let placement = &face_plan.placement;
+            let slabs = &face_plan.slabs;
             let n = placement.layers.len();
-            // clip every slab of this face on the CPU, in parallel
+            // clip every slab of this face on the CPU, in parallel (to the depth range the layer
+            // records: its slab, or for overlapping slabs the extended range)
             let t = Instant::now();
-            let prepared: Vec<Slab> = placement
-                .layers
-                .par_iter()
-                .enumerate()
-                .map(|(k, layer)| {
-                    self.prepare_slab(
-                        &class.bins[slot][k],
-                        center,
-                        face,
-                        layer.near_border,
-                        layer.far_border,
-                    )
+            let prepared: Vec<Slab> = (0..n)
+                .into_par_iter()
+                .map(|k| {
+                    self.prepare_slab(&class.bins[slot][k], center, face, slabs.lo(k), slabs.hi(k))
                 })
                 .collect();
             out.clip_seconds += t.elapsed().as_secs_f64();
             let mut images = Vec::with_capacity(n);
             let mut depths = Vec::with_capacity(n);
-            for (k, (slab, layer)) in prepared.into_iter().zip(&placement.layers).enumerate() {
+            for (k, slab) in prepared.into_iter().enumerate() {
                 on_stage(&Stage::Record {
                     face,
                     layer: k,
                     layers: n,
                 });
-                let near_plane = 0.5 * layer.near_border.min(near_field);
+                let (lo, hi) = (slabs.lo(k), slabs.hi(k));
+                let near_plane = 0.5 * lo.min(near_field);
                 let frame = self
                     .recorder
-                    .record(
+                    .record_with(
                         &self.materials,
                         DVec3::ZERO,
                         face,
@@ -373,6 +389,7 @@ impl<'a> Baker<'a> {
                         &slab.runs,
                         near_plane,
                         &self.lighting,
+                        recording.coverage,
                     )
                     .map_err(|e| cell_err(format!("recording face {face} layer {k}: {e}")))?;
                 if depths_only {
@@ -380,11 +397,10 @@ impl<'a> Baker<'a> {
                     continue;
                 }
                 let mut border = vec![false; (res * res) as usize];
-                let planes: Vec<f64> = [layer.near_border, layer.far_border]
-                    .into_iter()
-                    .filter(|p| p.is_finite())
-                    .collect();
-                mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
+                if recording.crack_free {
+                    let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
+                    mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
+                }
                 let image = LayerImage::from_parts(res, frame.rgba, border)
                     .map_err(|e| cell_err(format!("face {face} layer {k}: {e}")))?;
                 out.opaque_recorded += image.opaque_count();
@@ -393,7 +409,7 @@ impl<'a> Baker<'a> {
             if depths_only {
                 out.depths.push(depths);
             } else {
-                if let Some(inner) = images.last_mut() {
+                if let Some(inner) = images.last_mut().filter(|_| recording.crack_free) {
                     let along = cell.half.abs().dot(face.forward().abs());
                     let near = self.prepare_slab(&class.near, center, face, along, near_field);
                     let frame = self
@@ -557,6 +573,14 @@ pub fn validate_params(p: &BakeParams) -> Result<(), BakeError> {
             "the micro-texture threshold must be in [0, 1] (got {})",
             p.micro_threshold
         ));
+    }
+    if let Layering::Equidistant { overlap } = p.layering {
+        if !(overlap.is_finite() && (0.0..=1.0).contains(&overlap)) {
+            return bad(format!(
+                "the equidistant layering's `overlap` (--overlap) must be a fraction of a slab's \
+                 depth in [0, 1] (got {overlap})"
+            ));
+        }
     }
     Ok(())
 }

@@ -4,6 +4,7 @@
 
 pub mod cell_bake;
 pub mod clip_border;
+pub mod layering;
 pub mod orchestrate;
 
 pub use cell_bake::{place_cell, validate_params, Baker, Stage};

@@ -2,6 +2,10 @@
 //! per cell placement, classification, crack-free GPU recording and compression, each cell file
 //! written atomically as soon as it is done. Resumable (intact cells baked with identical
 //! parameters are skipped), shardable (`--shard K/N`, then `lemi bake --merge BUNDLE`).
+//!
+//! `--strategy` picks the far-field layering baked (`BakeParams::layering`): `lemi` (the optimal
+//! placement, the default), `cubemap` (one layer per face) or `equidistant` (Schaufler's layered
+//! impostors, with `--overlap`). `warp` and `dynamic` are not baked: they run from a `lemi` bundle.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -10,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_bake::{BakeJob, Baker, CellOutcome};
-use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, SceneRef};
+use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, Layering, SceneRef};
 use lemi_core::cell::{CellGrid, Shard, ViewCell};
 use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
 use lemi_core::{Aabb, Face};
@@ -77,6 +81,15 @@ pub struct Args {
     /// Allowed parallax angle α in degrees instead of an output view.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha_deg: Option<f64>,
+    /// Far-field strategy to bake: lemi (optimal layer placement), cubemap (one layer per face) or
+    /// equidistant (Schaufler's uniformly spaced, overlapping layers). warp and dynamic are not
+    /// baked: they run from a lemi bundle (`lemi walk/eval --strategy`).
+    #[arg(long, default_value = "lemi")]
+    pub strategy: String,
+    /// With --strategy equidistant: how far adjacent layers' depth ranges overlap, as a fraction
+    /// of a slab's depth on each side, in [0, 1] (default 0.1).
+    #[arg(long, allow_hyphen_values = true)]
+    pub overlap: Option<f64>,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
     #[arg(long, default_value_t = 8)]
     pub micro_grid: u32,
@@ -97,6 +110,55 @@ pub struct Args {
 /// Default output view (as `lemi layers`).
 const DEFAULT_FOV_DEG: f64 = 60.0;
 const DEFAULT_WIDTH: u32 = 1280;
+/// Default `--overlap` of the equidistant strategy.
+const DEFAULT_OVERLAP: f64 = 0.1;
+/// The strategies `lemi bake` bakes, by `--strategy` name.
+const BAKED_STRATEGIES: [&str; 3] = ["lemi", "cubemap", "equidistant"];
+
+/// The layering of `--strategy NAME` (with `--overlap`), or a clear error.
+fn layering_of(name: &str, overlap: Option<f64>) -> Result<Layering> {
+    let name = name.trim();
+    let layering = match name {
+        "lemi" => Layering::Optimal,
+        "cubemap" => Layering::Single,
+        "equidistant" => {
+            let o = overlap.unwrap_or(DEFAULT_OVERLAP);
+            if !(o.is_finite() && (0.0..=1.0).contains(&o)) {
+                bail!(
+                    "--overlap must be a fraction of a layer's depth in [0, 1] (got {o}): how far \
+                     adjacent equidistant layers overlap on each side"
+                );
+            }
+            Layering::Equidistant { overlap: o }
+        }
+        "warp" | "dynamic" => bail!(
+            "--strategy {name} is not baked: it runs from a `lemi` bundle (`lemi bake --strategy \
+             lemi`, then `lemi walk/eval BUNDLE --strategy {name}`); `lemi bake` bakes {}",
+            BAKED_STRATEGIES.join(", ")
+        ),
+        _ => bail!(
+            "unknown --strategy `{name}`: `lemi bake` bakes {} (warp and dynamic run from a `lemi` \
+             bundle with `lemi walk/eval --strategy`)",
+            BAKED_STRATEGIES.join(", ")
+        ),
+    };
+    if overlap.is_some() && !matches!(layering, Layering::Equidistant { .. }) {
+        bail!("--overlap only applies to --strategy equidistant (got --strategy {name})");
+    }
+    Ok(layering)
+}
+
+/// The `--strategy` name of a layering, and a description for the summary.
+fn strategy_name(layering: &Layering) -> (&'static str, String) {
+    match layering {
+        Layering::Optimal => ("lemi", "optimal layer placement".into()),
+        Layering::Single => ("cubemap", "one layer per face".into()),
+        Layering::Equidistant { overlap } => (
+            "equidistant",
+            format!("uniformly spaced layers, overlap {overlap}"),
+        ),
+    }
+}
 
 fn parse_region(s: &str) -> Result<Aabb, String> {
     let v: Vec<f64> = s
@@ -187,6 +249,7 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = args.out.clone() else {
         bail!("-o BUNDLE is required");
     };
+    let layering = layering_of(&args.strategy, args.overlap)?;
     let backend = BackendChoice::parse(&args.backend).context("--backend")?;
     let faces: Vec<Face> = match args.faces {
         4 => Face::HORIZONTAL.to_vec(),
@@ -238,7 +301,7 @@ pub fn run(args: Args) -> Result<()> {
         output_width: width,
         micro_grid: args.micro_grid,
         micro_threshold: args.micro_threshold,
-        layering: Default::default(),
+        layering,
     };
     lemi_bake::validate_params(&params)?;
     let mut warnings = Vec::new();
@@ -410,9 +473,12 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let bytes: u64 = per_cell.iter().map(|c| c.bytes).sum();
+    let (strategy, strategy_note) = strategy_name(&params.layering);
     if args.json {
         let out_json = json!({
             "bundle": out,
+            "strategy": strategy,
+            "layering": params.layering,
             "record": summary.record,
             "adapter": gpu.info().name,
             "cells": per_cell.len(),
@@ -444,6 +510,7 @@ pub fn run(args: Args) -> Result<()> {
         scene.triangle_count()
     );
     println!("adapter    {}", gpu.describe());
+    println!("strategy   {strategy} ({strategy_note})");
     println!(
         "cells      {} ({} baked, {} skipped as already baked) of a {}x{}x{} grid of {} m cells{}",
         per_cell.len(),

@@ -88,6 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         alpha_deg: None,
         micro_grid: 8,
         micro_threshold: 0.6,
+        strategy: "lemi".into(),
+        overlap: None,
         shard: None,
         backend: args.backend.clone(),
         json: false,

@@ -210,6 +210,7 @@ pub fn run(args: Args) -> Result<()> {
         args,
         backend,
         manifest,
+        scene_bounds: scene.bounds,
         scene: Some(scene),
         camera,
         record_path,
@@ -324,6 +325,8 @@ struct App {
     fov_x: f64,
     /// Moved into the viewer when the window exists.
     scene: Option<lemi_core::Scene>,
+    /// The scene's bounds (equidistant layers are placed by them).
+    scene_bounds: lemi_core::Aabb,
     camera: FlyCamera,
     record_path: PathBuf,
     held: Held,
@@ -643,12 +646,13 @@ impl App {
             match (&cell, drew_impostors) {
                 (Some(id), true) => {
                     let manifest = &self.manifest;
+                    let bounds = self.scene_bounds;
                     let entry = v.layers.entry(id.clone()).or_insert_with(|| {
                         manifest
                             .grid
                             .parse_id(id)
                             .map_err(anyhow::Error::from)
-                            .and_then(|c| CellLayers::of(&manifest.params, &c))
+                            .and_then(|c| CellLayers::of(&manifest.params, &c, &bounds))
                             .map_err(|e| eprintln!("warning: layers of cell {id}: {e:#}"))
                             .ok()
                     });

@@ -4,7 +4,11 @@
 //!
 //! Slabs follow the placement: for a face, layers are ordered far to near and `borders[k]` is the near
 //! border of layer `k` (descending; the last one is the near-field distance). Layer `k` records depths
-//! `borders[k] ≤ d ≤ borders[k − 1]` (`borders[−1] = ∞`). A triangle is binned to every slab its depth
+//! `borders[k] ≤ d ≤ borders[k − 1]` (`borders[−1] = ∞`). Strategies whose layers record overlapping
+//! depth ranges (Schaufler's layered impostors, `Layering::Equidistant`) give each layer its range
+//! explicitly ([`Slabs`], [`classify_slabs`]); contiguous borders are the special case
+//! [`Slabs::from_borders`], and [`classify`] is exactly [`classify_slabs`] of those. A triangle is
+//! binned to every slab its depth
 //! range along the face axis overlaps, if it may intersect the face's 90° pyramid (a conservative
 //! test against the pyramid's four side planes). A triangle therefore appears in as many bins as slabs
 //! it spans: total submissions stay a small multiple of the far triangles, never layers × scene.
@@ -163,6 +167,91 @@ pub fn slab_range(borders: &[f64], lo: f64, hi: f64) -> std::ops::Range<usize> {
     first..end.max(first)
 }
 
+/// The depth ranges (along the face axis, from the reference viewpoint) that the layers of one face
+/// record, far to near: layer `k` records `lo(k) ≤ d ≤ hi(k)`. Both bounds are non-increasing in
+/// `k` and the ranges leave no gap (`lo(k) ≤ hi(k + 1)`); adjacent ranges may overlap, so a
+/// triangle in an overlap is binned to both layers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Slabs {
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+}
+
+impl Slabs {
+    /// The contiguous slabs of descending near borders `borders` (layer `k` records
+    /// `[borders[k], borders[k − 1]]`, `borders[−1] = ∞`): what [`classify`] uses.
+    pub fn from_borders(borders: &[f64]) -> Slabs {
+        let hi = std::iter::once(f64::INFINITY)
+            .chain(borders.iter().copied())
+            .take(borders.len())
+            .collect();
+        Slabs {
+            lo: borders.to_vec(),
+            hi,
+        }
+    }
+
+    /// Slabs with explicit ranges `(lo, hi)`, far to near. Errors (saying which layer) unless every
+    /// bound is a number, `lo ≤ hi`, both bounds are non-increasing and no depth between two
+    /// adjacent ranges is left out.
+    pub fn new(ranges: &[(f64, f64)]) -> Result<Slabs, String> {
+        for (k, &(lo, hi)) in ranges.iter().enumerate() {
+            if lo.is_nan() || hi.is_nan() || lo > hi {
+                return Err(format!(
+                    "slab {k}: the range [{lo}, {hi}] is not an interval"
+                ));
+            }
+            if let Some(&(plo, phi)) = k.checked_sub(1).map(|p| &ranges[p]) {
+                if lo > plo || hi > phi {
+                    return Err(format!(
+                        "slab {k}: [{lo}, {hi}] is not nearer than slab {} [{plo}, {phi}]",
+                        k - 1
+                    ));
+                }
+                if hi < plo {
+                    return Err(format!(
+                        "slab {k}: a gap between its far bound {hi} and the near bound {plo} of slab {}",
+                        k - 1
+                    ));
+                }
+            }
+        }
+        Ok(Slabs {
+            lo: ranges.iter().map(|r| r.0).collect(),
+            hi: ranges.iter().map(|r| r.1).collect(),
+        })
+    }
+
+    /// Number of slabs (layers).
+    pub fn len(&self) -> usize {
+        self.lo.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.lo.is_empty()
+    }
+
+    /// The near bound of slab `k`.
+    pub fn lo(&self, k: usize) -> f64 {
+        self.lo[k]
+    }
+
+    /// The far bound of slab `k` (`∞` for an unbounded farthest slab).
+    pub fn hi(&self, k: usize) -> f64 {
+        self.hi[k]
+    }
+
+    /// Range of layers `k` whose slab overlaps depths `[lo, hi]` (for [`Slabs::from_borders`] the
+    /// same as [`slab_range`]).
+    pub fn range(&self, lo: f64, hi: f64) -> std::ops::Range<usize> {
+        // lo(k) and hi(k) are non-increasing: the layers with lo(k) <= hi and hi(k) >= lo are
+        // consecutive
+        let first = self.lo.partition_point(|&b| b > hi);
+        let end = self.hi.partition_point(|&b| b >= lo);
+        first..end.max(first)
+    }
+}
+
 /// How a box relates to a face's pyramid: outside one side plane, inside all four, or neither.
 fn box_vs_pyramid(corners: &[DVec3; 8], face: Face) -> (bool, bool) {
     let a = face.forward();
@@ -191,9 +280,23 @@ pub fn classify(
     borders: &[Vec<f64>],
 ) -> Classification {
     assert_eq!(faces.len(), borders.len(), "one border list per face");
+    let slabs: Vec<Slabs> = borders.iter().map(|b| Slabs::from_borders(b)).collect();
+    classify_slabs(tris, center, near_field, faces, &slabs)
+}
+
+/// [`classify`] with explicit (possibly overlapping) slab ranges per face, `slabs[face_slot]`.
+/// Panics if `faces` and `slabs` differ in length.
+pub fn classify_slabs(
+    tris: &TriangleBounds,
+    center: DVec3,
+    near_field: f64,
+    faces: &[Face],
+    slabs: &[Slabs],
+) -> Classification {
+    assert_eq!(faces.len(), slabs.len(), "one slab list per face");
     let mut out = Classification {
         near: Vec::new(),
-        bins: borders.iter().map(|b| vec![Vec::new(); b.len()]).collect(),
+        bins: slabs.iter().map(|b| vec![Vec::new(); b.len()]).collect(),
         far_triangles: 0,
         submitted: 0,
     };
@@ -234,9 +337,15 @@ pub fn classify(
             if outside {
                 continue;
             }
-            let range = slab_range(&borders[slot], dmin, dmax);
-            if inside && dmin >= near_field && range.len() == 1 {
-                // the whole cluster lies in one slab of this face
+            let face_slabs = &slabs[slot];
+            let range = face_slabs.range(dmin, dmax);
+            if inside
+                && dmin >= near_field
+                && range.len() == 1
+                && dmin >= face_slabs.lo(range.start)
+                && dmax <= face_slabs.hi(range.start)
+            {
+                // the whole cluster lies in one slab of this face (and in no other)
                 out.bins[slot][range.start].extend_from_slice(refs);
                 out.submitted += refs.len() as u64;
                 far[..refs.len()].fill(true);
@@ -250,7 +359,7 @@ pub fn classify(
                     continue;
                 }
                 let tmin = d[0].min(d[1]).min(d[2]);
-                for k in slab_range(&borders[slot], tmin, tmax) {
+                for k in face_slabs.range(tmin, tmax) {
                     out.bins[slot][k].push(*r);
                     out.submitted += 1;
                     far[i] = true;
@@ -278,9 +387,23 @@ pub fn classify_brute_force(
     borders: &[Vec<f64>],
 ) -> Classification {
     assert_eq!(faces.len(), borders.len(), "one border list per face");
+    let slabs: Vec<Slabs> = borders.iter().map(|b| Slabs::from_borders(b)).collect();
+    classify_slabs_brute_force(tris, center, near_field, faces, &slabs)
+}
+
+/// The plain scan of [`classify_brute_force`] with explicit slab ranges (the reference for
+/// [`classify_slabs`]). Each triangle is tested against every slab one by one.
+pub fn classify_slabs_brute_force(
+    tris: &TriangleBounds,
+    center: DVec3,
+    near_field: f64,
+    faces: &[Face],
+    slabs: &[Slabs],
+) -> Classification {
+    assert_eq!(faces.len(), slabs.len(), "one slab list per face");
     let mut out = Classification {
         near: Vec::new(),
-        bins: borders.iter().map(|b| vec![Vec::new(); b.len()]).collect(),
+        bins: slabs.iter().map(|b| vec![Vec::new(); b.len()]).collect(),
         far_triangles: 0,
         submitted: 0,
     };
@@ -300,7 +423,10 @@ pub fn classify_brute_force(
                 continue;
             }
             let dmin = d[0].min(d[1]).min(d[2]);
-            for k in slab_range(&borders[slot], dmin, dmax) {
+            let face_slabs = &slabs[slot];
+            for k in (0..face_slabs.len())
+                .filter(|&k| face_slabs.lo(k) <= dmax && face_slabs.hi(k) >= dmin)
+            {
                 out.bins[slot][k].push(*r);
                 out.submitted += 1;
                 far = true;
@@ -380,10 +506,8 @@ mod tests {
         assert!(c.submitted <= 2 * 8);
     }
 
-    /// Clustered classification equals the per-triangle scan on a scattered scene of many
-    /// triangles, from several centres (near, far, inside the scene).
-    #[test]
-    fn clusters_match_the_brute_force_scan() {
+    /// Many scattered triangles, most small, every tenth large (deterministic).
+    fn scattered_scene() -> Scene {
         let mut b = SceneBuilder::new();
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = move || {
@@ -418,7 +542,14 @@ mod tests {
                 indices,
             });
         }
-        let scene = b.finish();
+        b.finish()
+    }
+
+    /// Clustered classification equals the per-triangle scan on a scattered scene of many
+    /// triangles, from several centres (near, far, inside the scene).
+    #[test]
+    fn clusters_match_the_brute_force_scan() {
+        let scene = scattered_scene();
         let tb = TriangleBounds::new(&scene);
         assert_eq!(
             tb.clusters.iter().map(|c| c.range.len()).sum::<usize>(),
@@ -450,5 +581,116 @@ mod tests {
         let c = classify(&tb, DVec3::ZERO, 10.0, &[Face::PosZ], &[vec![20.0, 10.0]]);
         assert_eq!(c.near.len(), 2);
         assert_eq!(c.submitted, 0);
+    }
+
+    #[test]
+    fn contiguous_slabs_are_the_border_ranges() {
+        let b = [100.0, 50.0, 20.0, 10.0];
+        let slabs = Slabs::from_borders(&b);
+        assert_eq!(slabs.len(), 4);
+        assert_eq!(slabs.hi(0), f64::INFINITY);
+        assert_eq!((slabs.lo(2), slabs.hi(2)), (20.0, 50.0));
+        let probes = [
+            0.0, 1.0, 5.0, 10.0, 12.0, 20.0, 35.0, 50.0, 70.0, 100.0, 300.0,
+        ];
+        for &lo in &probes {
+            for &hi in probes.iter().filter(|&&h| h >= lo) {
+                assert_eq!(slabs.range(lo, hi), slab_range(&b, lo, hi), "[{lo}, {hi}]");
+            }
+        }
+        assert!(Slabs::from_borders(&[]).is_empty());
+    }
+
+    #[test]
+    fn overlapping_slabs_bin_a_triangle_in_the_overlap_twice() {
+        // slabs [40, ∞), [20, 45], [10, 25]: overlaps [40, 45] and [20, 25]
+        let slabs = Slabs::new(&[(40.0, f64::INFINITY), (20.0, 45.0), (10.0, 25.0)]).unwrap();
+        assert_eq!(slabs.range(42.0, 43.0), 0..2);
+        assert_eq!(slabs.range(30.0, 35.0), 1..2);
+        assert_eq!(slabs.range(21.0, 22.0), 1..3);
+        assert_eq!(slabs.range(11.0, 12.0), 2..3);
+        assert_eq!(slabs.range(1.0, 5.0).len(), 0);
+        for (z, bins) in [(42.0f32, vec![0, 1]), (30.0, vec![1]), (22.0, vec![1, 2])] {
+            let tb = TriangleBounds::new(&quad_scene(z, -1.0, 1.0));
+            for c in [
+                classify_slabs(
+                    &tb,
+                    DVec3::ZERO,
+                    10.0,
+                    &[Face::PosZ],
+                    std::slice::from_ref(&slabs),
+                ),
+                classify_slabs_brute_force(
+                    &tb,
+                    DVec3::ZERO,
+                    10.0,
+                    &[Face::PosZ],
+                    std::slice::from_ref(&slabs),
+                ),
+            ] {
+                let holding: Vec<usize> = (0..3).filter(|&k| !c.bins[0][k].is_empty()).collect();
+                assert_eq!(holding, bins, "quad at z = {z}");
+                assert_eq!(c.far_triangles, 2);
+                assert_eq!(c.submitted, 2 * bins.len() as u64);
+            }
+        }
+    }
+
+    #[test]
+    fn slab_ranges_that_are_not_nested_layers_are_rejected() {
+        assert!(Slabs::new(&[(10.0, 5.0)]).unwrap_err().contains("slab 0"));
+        assert!(Slabs::new(&[(f64::NAN, 5.0)]).is_err());
+        // a gap between 30 and 40
+        let e = Slabs::new(&[(40.0, 100.0), (10.0, 30.0)]).unwrap_err();
+        assert!(e.contains("gap"), "{e}");
+        // not ordered far to near
+        assert!(Slabs::new(&[(10.0, 30.0), (20.0, 100.0)]).is_err());
+        assert!(Slabs::new(&[]).unwrap().is_empty());
+    }
+
+    /// With overlapping slabs the clustered classification still equals the scan, and with zero
+    /// overlap it equals the classification by borders.
+    #[test]
+    fn overlapping_clusters_match_the_brute_force_scan() {
+        let scene = scattered_scene();
+        let tb = TriangleBounds::new(&scene);
+        let (near, far) = (12.0, 300.0);
+        let n = 8;
+        let depth = (far - near) / n as f64;
+        for overlap in [0.0, 0.1, 0.5, 1.0] {
+            let ranges: Vec<(f64, f64)> = (0..n)
+                .map(|k| {
+                    let b0 = near + depth * (n - 1 - k) as f64;
+                    let b1 = b0 + depth;
+                    let lo = (b0 - overlap * depth).max(near);
+                    let hi = if k == 0 {
+                        f64::INFINITY
+                    } else {
+                        b1 + overlap * depth
+                    };
+                    (lo, hi)
+                })
+                .collect();
+            let slabs = Slabs::new(&ranges).unwrap();
+            let faces = &Face::ALL[..];
+            let sl = vec![slabs; faces.len()];
+            for c in [DVec3::new(0.0, 1.7, 0.0), DVec3::new(150.0, 5.0, -90.0)] {
+                let fast = classify_slabs(&tb, c, near, faces, &sl);
+                let slow = classify_slabs_brute_force(&tb, c, near, faces, &sl);
+                assert_eq!(fast.near, slow.near);
+                assert_eq!(fast.bins, slow.bins, "overlap {overlap}");
+                assert_eq!(fast.far_triangles, slow.far_triangles);
+                assert_eq!(fast.submitted, slow.submitted);
+                assert!(fast.far_triangles > 0);
+                if overlap == 0.0 {
+                    let borders: Vec<f64> = ranges.iter().map(|r| r.0).collect();
+                    let by_borders = classify(&tb, c, near, faces, &vec![borders; faces.len()]);
+                    assert_eq!(by_borders.bins, fast.bins);
+                    assert_eq!(by_borders.submitted, fast.submitted);
+                } else {
+                    assert!(fast.submitted > fast.far_triangles);
+                }
+            }
+        }
     }
 }

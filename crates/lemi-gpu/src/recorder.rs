@@ -20,6 +20,11 @@
 //! triangle, so texels inside get the original interpolation and the overshoot the nearest values
 //! on the triangle (colours, normals and UVs are never extrapolated).
 //!
+//! [`Coverage::CentreSampled`] records with ordinary rasterization instead (a texel is covered when
+//! its centre lies inside the projected triangle, as in the reference renderer): the baseline of
+//! Schaufler's layered impostors, which have no conservative coverage. It is a uniform of the same
+//! pipeline; the conservative path is unchanged by it.
+//!
 //! Depth test: nearest wins (reverse-Z, `Greater`); an overshoot fragment (texel centre outside its
 //! triangle) is pushed back by a relative 2⁻¹⁶ in the depth buffer, so along a shared edge the
 //! triangle containing the texel centre wins, as in the reference renderer.
@@ -46,6 +51,16 @@ pub struct MaterialRun {
     pub material: u32,
     pub first: u32,
     pub count: u32,
+}
+
+/// Which texels a triangle covers when recorded.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Coverage {
+    /// Every texel whose square the projected triangle touches (crack-free recording, TR sec. 2.2).
+    #[default]
+    Conservative,
+    /// Ordinary rasterization: the texels whose centre the projected triangle covers.
+    CentreSampled,
 }
 
 /// One recorded layer, rows top to bottom in the texel convention of [`lemi_core::face`].
@@ -223,7 +238,7 @@ impl LayerRecorder {
 
     /// Records `triangles` (three vertices each, positions relative to `center`, already clipped to
     /// the slab) seen along `face` from `center`, with the materials of `runs` and near plane
-    /// `near`. Triangles not named by any run are not drawn.
+    /// `near`, with conservative coverage. Triangles not named by any run are not drawn.
     #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
@@ -234,6 +249,31 @@ impl LayerRecorder {
         runs: &[MaterialRun],
         near: f64,
         lighting: &Lighting,
+    ) -> Result<LayerFrame, GpuError> {
+        self.record_with(
+            materials,
+            center,
+            face,
+            triangles,
+            runs,
+            near,
+            lighting,
+            Coverage::Conservative,
+        )
+    }
+
+    /// [`LayerRecorder::record`] with a choice of [`Coverage`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_with(
+        &self,
+        materials: &GpuMaterials,
+        center: DVec3,
+        face: Face,
+        triangles: &[ClipVertex],
+        runs: &[MaterialRun],
+        near: f64,
+        lighting: &Lighting,
+        coverage: Coverage,
     ) -> Result<LayerFrame, GpuError> {
         if !center.is_finite() {
             return Err(GpuError::Invalid(format!(
@@ -281,6 +321,10 @@ impl LayerRecorder {
         let mut globals = ShadingGlobals::new(&view, lighting, 0.0)?;
         globals.params[1] = self.res as f32;
         globals.params[2] = near as f32;
+        globals.params[3] = match coverage {
+            Coverage::Conservative => 0.0,
+            Coverage::CentreSampled => 1.0,
+        };
         let vertices = rec_vertices(triangles);
         let targets = self
             .targets
@@ -374,5 +418,107 @@ mod tests {
         assert_eq!(r[1].positions, r[0].positions);
         assert_eq!(r[2].positions[1][0], 1.0);
         assert_eq!(r[0].colors[2], [1.0, 1.0, 0.0, 1.0]);
+    }
+
+    /// Texel-centre coverage of the projected triangle `p` (pixel coordinates): `Some(true)` inside
+    /// by more than `eps` pixels, `Some(false)` outside by more than `eps`, `None` on an edge.
+    fn centre_inside(c: glam::DVec2, p: &[glam::DVec2; 3], eps: f64) -> Option<bool> {
+        let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
+        let mut min_d = f64::INFINITY;
+        for k in 0..3 {
+            let (a, b) = (p[k], p[(k + 1) % 3]);
+            let e = b - a;
+            // signed distance, positive inside for either orientation
+            let d = e.perp_dot(c - a) / e.length() * area.signum();
+            min_d = min_d.min(d);
+        }
+        if min_d > eps {
+            Some(true)
+        } else if min_d < -eps {
+            Some(false)
+        } else {
+            None
+        }
+    }
+
+    /// Centre-sampled recording covers exactly the texels whose centre lies inside the projected
+    /// triangle (ties within 0.01 px aside), a subset of the conservative coverage, which covers
+    /// more (the texels the triangle only touches).
+    #[test]
+    fn centre_sampled_coverage_is_the_texel_centres_inside() {
+        let Some(gpu) = Gpu::for_tests() else { return };
+        let m = lemi_core::Material {
+            name: "white".into(),
+            base_color: [1.0; 4],
+            texture: None,
+        };
+        let mats = GpuMaterials::upload(&gpu, &[m], &[]).expect("materials");
+        let res = 32;
+        let rec = LayerRecorder::new(&gpu, res).expect("recorder");
+        let l = Lighting::default();
+        let mut seed = 0x1234_5678_9abc_def1u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let face = Face::PosZ;
+        let (mut extra, mut centre_total) = (0usize, 0usize);
+        for _ in 0..24 {
+            let depth = 5.0 + 5.0 * rnd();
+            let mut corner = || {
+                let rel = face.point(
+                    1.6 * rnd() - 0.8,
+                    1.6 * rnd() - 0.8,
+                    depth * (1.0 + 0.2 * rnd()),
+                );
+                ClipVertex {
+                    rel,
+                    normal: [0.0, 0.0, 1.0],
+                    uv: [0.0; 2],
+                    color: [255.0; 4],
+                }
+            };
+            let tri = [corner(), corner(), corner()];
+            let runs = [MaterialRun {
+                material: 0,
+                first: 0,
+                count: 1,
+            }];
+            let rec_with = |c| {
+                rec.record_with(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l, c)
+                    .expect("record")
+            };
+            let cons = rec_with(Coverage::Conservative);
+            let centre = rec_with(Coverage::CentreSampled);
+            assert_eq!(
+                cons,
+                rec.record(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l)
+                    .unwrap()
+            );
+            let p = tri.map(|v| {
+                let (s, t, _) = face.project(v.rel).expect("in front");
+                glam::DVec2::new((s + 1.0) * 0.5 * res as f64, (t + 1.0) * 0.5 * res as f64)
+            });
+            for j in 0..res {
+                for i in 0..res {
+                    let c = glam::DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+                    let covered = centre.covered(i, j);
+                    if let Some(inside) = centre_inside(c, &p, 0.01) {
+                        assert_eq!(covered, inside, "texel ({i}, {j}) of {p:?}");
+                    }
+                    if covered {
+                        assert!(cons.covered(i, j), "conservative misses ({i}, {j})");
+                        let k = (j * res + i) as usize;
+                        let d = centre.depth[k];
+                        assert!(d.is_finite() && (d - cons.depth[k]).abs() <= 1e-3 * d);
+                    }
+                }
+            }
+            centre_total += centre.covered_count();
+            extra += cons.covered_count() - centre.covered_count();
+        }
+        assert!(centre_total > 0 && extra > 0, "{centre_total} {extra}");
     }
 }

@@ -9,6 +9,12 @@
 // with them, so interior texels get exactly the original interpolation and the overshoot gets the
 // nearest values on the triangle (no extrapolated colours or UVs).
 // Targets as in render.wgsl: 0 = Rgba8UnormSrgb colour, 1 = R32Uint bits of the f32 linear depth.
+// Uniforms: globals.params = (alpha cutoff, Res, near plane, coverage mode). Coverage mode 0 is the
+// conservative coverage above; 1 is ordinary rasterization (a texel is covered when its centre is
+// inside the projected triangle, as in render.wgsl), for strategies that record without it
+// (Schaufler's layered impostors): the vertex shader emits the original corners and the fragment
+// shader skips the texel/triangle overlap test and the overshoot depth push-back. The conservative
+// path computes exactly what it did before the mode existed (the mode only selects at the end).
 
 struct RecIn {
     @location(0) p0: vec3<f32>,
@@ -182,6 +188,14 @@ fn vs_main(v: RecIn) -> RecOut {
     out.view_depth = w;
     out.tri01 = vec4<f32>(px[0], px[1]);
     out.tri2 = vec4<f32>(px[2], w_min, w_max);
+    if (globals.params.w > 0.5) {
+        // Centre-sampled: the original corner, its own barycentrics and depth.
+        var unit = vec3<f32>(0.0);
+        unit[k] = 1.0;
+        out.clip = clip[k];
+        out.bary = unit;
+        out.view_depth = clip[k].w;
+    }
     return out;
 }
 
@@ -212,19 +226,22 @@ fn fs_main(in: RecOut) -> FragmentOut {
     let albedo = surface_albedo(s);
     // Exact texel-square / triangle overlap by separating axes (the two box axes and the three edge
     // normals): removes the dilation's overshoot at acute corners and around degenerate triangles.
+    // (Not in the centre-sampled mode: the rasterizer's own coverage is the answer there.)
+    let conservative = globals.params.w <= 0.5;
     let c = in.clip.xy;
     let a = in.tri01.xy;
     let b = in.tri01.zw;
     let d = in.tri2.xy;
-    if (separated(vec2<f32>(1.0, 0.0), c, a, b, d) || separated(vec2<f32>(0.0, 1.0), c, a, b, d)) {
+    if (conservative && (separated(vec2<f32>(1.0, 0.0), c, a, b, d)
+        || separated(vec2<f32>(0.0, 1.0), c, a, b, d))) {
         discard;
     }
     let eab = b - a;
     let ebd = d - b;
     let eda = a - d;
-    if (separated(vec2<f32>(-eab.y, eab.x), c, a, b, d)
+    if (conservative && (separated(vec2<f32>(-eab.y, eab.x), c, a, b, d)
         || separated(vec2<f32>(-ebd.y, ebd.x), c, a, b, d)
-        || separated(vec2<f32>(-eda.y, eda.x), c, a, b, d)) {
+        || separated(vec2<f32>(-eda.y, eda.x), c, a, b, d))) {
         discard;
     }
     if (albedo.a < globals.params.x) {
@@ -237,7 +254,8 @@ fn fs_main(in: RecOut) -> FragmentOut {
     // against a triangle that contains the centre at the same depth (the neighbour across a shared
     // edge), so shared edges keep the colour the reference renderer gives them: its reverse-Z depth
     // is pushed back by a relative 2^-16.
-    let inside = min(min(in.bary.x, in.bary.y), in.bary.z) >= 0.0;
+    // (Centre-sampled texels are inside by definition.)
+    let inside = min(min(in.bary.x, in.bary.y), in.bary.z) >= 0.0 || !conservative;
     out.z = select(in.clip.z * (1.0 - 1.0 / 65536.0), in.clip.z, inside);
     return out;
 }

@@ -6,7 +6,7 @@
 //! ([`LayerDepths::texel_of`], `lemi_core::parallax_error`), specialised for speed: a point on a
 //! layer of face `f` lies in `f`'s 90° pyramid, so only the face of the point's dominant axis is
 //! tried, and its layer distances are searched by bisection (a test checks both agree). The layer distances come from the bake's placement of the cell
-//! ([`lemi_bake::place_cell`], pure math on the manifest's parameters), so nothing is read from
+//! ([`lemi_bake::cell_bake::place_cell_in`], pure math on the manifest's parameters), so nothing is read from
 //! the cell file. Pixels on no layer plane (near geometry) are shown in grey, the background is
 //! left as it is.
 
@@ -62,8 +62,12 @@ pub struct TintStats {
 
 impl CellLayers {
     /// The layers the bake placed for `cell` with `params`.
-    pub fn of(params: &BakeParams, cell: &ViewCell) -> anyhow::Result<CellLayers> {
-        let placements = lemi_bake::place_cell(params, cell)?;
+    pub fn of(
+        params: &BakeParams,
+        cell: &ViewCell,
+        scene_bounds: &lemi_core::Aabb,
+    ) -> anyhow::Result<CellLayers> {
+        let placements = lemi_bake::cell_bake::place_cell_in(params, cell, scene_bounds)?;
         let distances: Vec<Vec<f64>> = placements
             .iter()
             .map(|p| p.layers.iter().map(|l| l.distance).collect())
@@ -195,7 +199,12 @@ mod tests {
             center: DVec3::new(5.0, 1.7, 5.0),
             half: DVec3::splat(5.0),
         };
-        let layers = CellLayers::of(&params(), &cell).unwrap();
+        let layers = CellLayers::of(
+            &params(),
+            &cell,
+            &lemi_core::Aabb::new(DVec3::splat(-1e3), DVec3::splat(1e3)),
+        )
+        .unwrap();
         assert_eq!(layers.max_layers, 4);
         // look along +X from the centre: the +X face's layer k is the plane x = centre + D_k
         let cam = Camera::from_yaw_pitch(cell.center, 90.0, 0.0, 60.0, 8, 8).unwrap();
@@ -234,7 +243,12 @@ mod tests {
         };
         let mut p = params();
         p.target = LayerTarget::Layers(7);
-        let layers = CellLayers::of(&p, &cell).unwrap();
+        let layers = CellLayers::of(
+            &p,
+            &cell,
+            &lemi_core::Aabb::new(DVec3::splat(-1e3), DVec3::splat(1e3)),
+        )
+        .unwrap();
         // deterministic pseudo-random points on the layer planes and between them
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = || {

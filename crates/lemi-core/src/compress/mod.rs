@@ -72,11 +72,26 @@ pub struct FaceLayers {
 }
 
 /// Parameters of all stages.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CompressOptions {
+    /// Run gap filling (sec. 5.1; default `true`). Off for layerings that do not fill gaps
+    /// (Schaufler's layered impostors, `Layering::Equidistant`): the layers then go to hidden-texel
+    /// removal as recorded and [`CompressStats::gap_fill`] stays zero.
+    pub gap_fill: bool,
     pub hidden: HiddenTexelOptions,
     pub micro: MicroTextureOptions,
     pub packing: PackingOptions,
+}
+
+impl Default for CompressOptions {
+    fn default() -> Self {
+        CompressOptions {
+            gap_fill: true,
+            hidden: HiddenTexelOptions::default(),
+            micro: MicroTextureOptions::default(),
+            packing: PackingOptions::default(),
+        }
+    }
 }
 
 /// Statistics of a whole cell.
@@ -101,8 +116,9 @@ pub struct CompressedCell {
     pub stats: CompressStats,
 }
 
-/// Runs gap filling, hidden-texel removal, micro-texture extraction and packing on one view cell.
-/// The layer images are modified in place (gap filled, hidden texels erased). A micro-texture's
+/// Runs gap filling (unless [`CompressOptions::gap_fill`] is off), hidden-texel removal,
+/// micro-texture extraction and packing on one view cell. The layer images are modified in place
+/// (gap filled, hidden texels erased). A micro-texture's
 /// `layer` is the index of its layer in the caller's order.
 pub fn compress_cell(
     faces: &mut [FaceLayers],
@@ -151,8 +167,13 @@ pub fn compress_cell(
             if far_first {
                 f.layers.reverse();
             }
-            let mut result = fill_gaps(&mut f.layers)
-                .and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
+            let gaps = if options.gap_fill {
+                fill_gaps(&mut f.layers)
+            } else {
+                Ok(GapFillStats::default())
+            };
+            let mut result =
+                gaps.and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
             if far_first {
                 f.layers.reverse();
                 if let Ok((_, h)) = &mut result {
@@ -200,4 +221,56 @@ pub fn compress_cell(
         placements,
         stats,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two layers of one face, nearest first: a red block at x 2..6 in the near layer, a blue
+    /// block at x 6..10 in the far one (a surface split between them, one texel short of closing).
+    fn split_surface() -> Vec<FaceLayers> {
+        let res = 16;
+        let block = |x0: u32, x1: u32, c: [u8; 4]| {
+            let mut l = LayerImage::new(res);
+            for y in 4..12 {
+                for x in x0..x1 {
+                    let i = l.index(x, y);
+                    l.set_texel(i, c);
+                }
+            }
+            l
+        };
+        vec![FaceLayers {
+            face: Face::PosZ,
+            distances: vec![50.0, 100.0],
+            layers: vec![
+                block(2, 6, [255, 0, 0, 255]),
+                block(6, 10, [0, 0, 255, 255]),
+            ],
+        }]
+    }
+
+    #[test]
+    fn gap_filling_is_on_by_default_and_can_be_turned_off() {
+        assert!(CompressOptions::default().gap_fill);
+        let mut filled = split_surface();
+        let on = compress_cell(&mut filled, &CompressOptions::default()).unwrap();
+        assert!(on.stats.gap_fill.filled > 0, "{:?}", on.stats.gap_fill);
+        // the near layer's border texels were copied into the far layer at x = 5
+        let far = &filled[0].layers[1];
+        assert_eq!(far.texel(far.index(5, 8)), [255, 0, 0, 255]);
+
+        let mut raw = split_surface();
+        let options = CompressOptions {
+            gap_fill: false,
+            ..Default::default()
+        };
+        let off = compress_cell(&mut raw, &options).unwrap();
+        assert_eq!(off.stats.gap_fill, GapFillStats::default());
+        let far = &raw[0].layers[1];
+        assert!(!far.is_opaque(far.index(5, 8)), "no texel copied");
+        assert_eq!(far.opaque_count(), 4 * 8);
+        assert!(off.stats.hidden.opaque_before < on.stats.hidden.opaque_before);
+    }
 }
