@@ -476,9 +476,12 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
     }
     let _ = writeln!(
         m,
-        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | speed-up | stalls | regenerations | max px | p99 px | crack px | mean FLIP |"
+        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | speed-up | stalls | regenerations | far-field pixels | max px | p99 px | crack px | mean FLIP |"
     );
-    let _ = writeln!(m, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        m,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     let geo_median = geometry.and_then(|g| num(g, "geometry_median_ms"));
     for r in rows {
         if !r.errors.is_empty() && r.walk.is_none() && r.eval.is_none() {
@@ -529,9 +532,16 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
                 })
                 .unwrap_or_else(|| "–".into())
         };
+        let far_share = e.and_then(|e| {
+            let px = num(e, "error_pixels")?;
+            let views = num(e, "views")?;
+            let w = e["size"][0].as_f64()?;
+            let h = e["size"][1].as_f64()?;
+            (views * w * h > 0.0).then(|| format!("{:.1} %", 100.0 * px / (views * w * h)))
+        });
         let _ = writeln!(
             m,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             bake_s.unwrap_or_else(|| "–".into()),
             disk,
@@ -543,6 +553,7 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
                 .map_or("–".into(), |v| v.to_string()),
             walk.and_then(|w| w.get("regenerations"))
                 .map_or("–".into(), |v| v.to_string()),
+            far_share.unwrap_or_else(|| "–".into()),
             px("max_error_px"),
             px("p99_error_px"),
             e.and_then(|e| e.get("crack_pixels"))
@@ -558,7 +569,8 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
          one cell; *median/p99 ms*: wall-clock frame time of the walk (readback included), \
          *speed-up*: all-geometry median over the strategy's median; *stalls*: frames that waited \
          for a cell; *regenerations*: impostors regenerated (dynamic) or far fields recorded at \
-         run time (warp); *max/p99 px*: geometric error of the far-field pixels in output pixels \
+         run time (warp); *far-field pixels*: share of the evaluated pixels drawn by the far field (the rest is near \
+         geometry or background), the pixels the error columns are over; *max/p99 px*: geometric error of the far-field pixels in output pixels \
          (`lemi eval --strategy S`); *crack px*: pixels where the reference shows a surface and \
          the strategy shows background (layered strategies also count pixels showing something \
          farther than one slab behind); *mean FLIP*: mean over the views of the per-view mean \

@@ -195,6 +195,9 @@ pub fn run(args: Args) -> Result<()> {
         v["gap_filled_pixels"] = serde_json::json!(run.gap_filled.count());
         v["gap_filled_max_error_px"] = serde_json::json!(run.gap_filled.max());
         v["seconds"] = serde_json::json!(seconds);
+        let (w, h, fov) = lemi_eval::output_view(&manifest, &options);
+        v["size"] = serde_json::json!([w, h]);
+        v["fov_x_deg"] = serde_json::json!(fov);
         v["report"] = serde_json::json!(index);
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
