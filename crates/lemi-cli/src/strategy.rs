@@ -3,7 +3,9 @@
 use anyhow::{bail, Result};
 use lemi_core::bundle::Manifest;
 use lemi_runtime::StreamerOptions;
+use lemi_strategy::dynamic::{DynamicOptions, DynamicStrategy};
 use lemi_strategy::layered::{bundle_strategy, LayeredStrategy};
+use lemi_strategy::warp::{WarpOptions, WarpStrategy};
 use lemi_strategy::{Strategy, StrategyContext, StrategyKind};
 
 /// The strategy to run on a bundle: `name` if given (checked against what the bundle can serve),
@@ -37,8 +39,7 @@ pub fn open(
         StrategyKind::Lemi | StrategyKind::Cubemap | StrategyKind::Equidistant => {
             Box::new(LayeredStrategy::new(ctx, kind, streamer)?)
         }
-        StrategyKind::Warp | StrategyKind::Dynamic => {
-            bail!("--strategy {kind} is not available yet")
-        }
+        StrategyKind::Warp => Box::new(WarpStrategy::new(ctx, WarpOptions::default())?),
+        StrategyKind::Dynamic => Box::new(DynamicStrategy::new(ctx, DynamicOptions::default())?),
     })
 }

@@ -17,6 +17,7 @@
 //! layers, and are drawn by [`layered::LayeredStrategy`] (the streaming runtime). `warp` and
 //! `dynamic` use a `lemi` bundle for its grid and near lists and build their far field themselves.
 
+pub mod dynamic;
 pub mod eval;
 pub mod layered;
 pub mod warp;
