@@ -171,10 +171,13 @@ impl Gpu {
             };
             let Some(adapter) = adapter else { continue };
             let info = adapter.get_info();
+            // Timestamp queries when the adapter has them (lavapipe does; llvmpipe's GL does not):
+            // the renderers time their passes with them (`Renderer::last_gpu_ms`).
+            let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
             let (device, queue) = adapter
                 .request_device(&wgpu::DeviceDescriptor {
                     label: Some("lemi"),
-                    required_features: wgpu::Features::empty(),
+                    required_features: features,
                     required_limits: adapter.limits(),
                     ..Default::default()
                 })
@@ -236,6 +239,14 @@ impl Gpu {
     /// The device's limits.
     pub fn limits(&self) -> wgpu::Limits {
         self.device.limits()
+    }
+
+    /// Whether the device has timestamp queries, so that the renderers report GPU times
+    /// ([`crate::Renderer::last_gpu_ms`], [`crate::ImpostorRenderer::last_gpu_ms`]).
+    pub fn has_timestamps(&self) -> bool {
+        self.device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
     }
 
     /// The bind group layouts of the shared shading module (group 0: globals, group 1: material).

@@ -1,9 +1,11 @@
 // lemi impostor quads (appended to shading.wgsl): the layered far field of one view cell, drawn as
-// textured quads (GI 2002 sec. 3). Unlit: the macro-texture texels are final sRGB colours; the
-// texture format (Rgba8UnormSrgb) decodes them, the colour target re-encodes them, so the round
-// trip is exact. Alpha test against globals.params.y, then the same targets as render.wgsl:
-// Target 0: Rgba8UnormSrgb colour, alpha 1 where drawn. Target 1: R32Uint holding the bits of the
-// f32 linear view depth.
+// textured quads (GI 2002 sec. 3). Unlit: the macro-texture texels are final sRGB colours copied
+// to the colour target unchanged: either an Rgba8Unorm macro-texture into the Rgba8Unorm view of
+// the colour target (no conversion at all), or (GL, no such views) an Rgba8UnormSrgb one into the
+// sRGB target, decoded and re-encoded, which round-trips exactly. Alpha test against
+// globals.params.y (fs_quad; fs_quad_opaque for quads whose texels all pass it), then the same
+// targets as render.wgsl: Target 0: colour, alpha 1 where drawn. Target 1: R32Uint holding the
+// bits of the f32 linear view depth.
 //
 // The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle); the sampler
 // binding stays in the layout for filtering modes to come.
@@ -45,17 +47,33 @@ fn vs_quad(v: QuadIn) -> QuadOut {
     return out;
 }
 
-@fragment
-fn fs_quad(in: QuadOut) -> QuadFragmentOut {
-    // Nearest texel, clamped to the quad's own rectangle: the quad is grown a little beyond it
-    // (QUAD_GROWTH_TEXELS) and must never fetch a neighbour's texels or the transparent gap.
+// Nearest texel, clamped to the quad's own rectangle: the quad is grown a little beyond it
+// (QUAD_GROWTH_TEXELS) and must never fetch a neighbour's texels or the transparent gap.
+fn quad_texel(in: QuadOut) -> vec4<f32> {
     let texel = clamp(floor(in.uv), in.rect.xy, in.rect.zw - vec2<f32>(1.0, 1.0));
-    let t = textureLoad(macro_texture, vec2<i32>(texel), 0);
-    if (t.a < globals.params.y) {
-        discard;
-    }
+    return textureLoad(macro_texture, vec2<i32>(texel), 0);
+}
+
+fn quad_output(t: vec4<f32>, in: QuadOut) -> QuadFragmentOut {
     var out: QuadFragmentOut;
     out.color = vec4<f32>(t.rgb, 1.0);
     out.depth = bitcast<u32>(in.view_depth);
     return out;
+}
+
+// Quads with texels below the alpha cutoff.
+@fragment
+fn fs_quad(in: QuadOut) -> QuadFragmentOut {
+    let t = quad_texel(in);
+    if (t.a < globals.params.y) {
+        discard;
+    }
+    return quad_output(t, in);
+}
+
+// Quads whose texels all pass the alpha test (decided on the CPU): the same output without the
+// test, so the rasterizer can test and write depth before shading.
+@fragment
+fn fs_quad_opaque(in: QuadOut) -> QuadFragmentOut {
+    return quad_output(quad_texel(in), in);
 }

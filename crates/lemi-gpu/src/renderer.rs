@@ -7,6 +7,7 @@
 //! as `R32Float`, so the depth image is linear on every backend. Readback pads rows to wgpu's
 //! 256-byte `COPY_BYTES_PER_ROW_ALIGNMENT`.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use lemi_core::camera::View;
@@ -99,6 +100,7 @@ pub struct Renderer {
     globals_group: wgpu::BindGroup,
     max_dim: u32,
     targets: Mutex<Option<Targets>>,
+    last_gpu: GpuTime,
 }
 
 impl Renderer {
@@ -179,6 +181,7 @@ impl Renderer {
                 globals_group,
                 max_dim: gpu.limits().max_texture_dimension_2d,
                 targets: Mutex::new(None),
+                last_gpu: GpuTime::default(),
             }
         })
     }
@@ -190,6 +193,38 @@ impl Renderer {
         view: &View,
         options: &RenderOptions,
     ) -> Result<Frame, GpuError> {
+        self.draw(scene, view, options, true)
+            .and_then(|f| f.ok_or_else(|| GpuError::Readback("no frame was read back".into())))
+    }
+
+    /// Renders like [`Renderer::render`] and waits until the GPU has finished, without copying or
+    /// reading the images back (for timing the rendering alone; [`Renderer::last_gpu_ms`] is
+    /// updated too).
+    pub fn render_no_readback(
+        &self,
+        scene: &GpuScene,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<(), GpuError> {
+        self.draw(scene, view, options, false).map(|_| ())
+    }
+
+    /// GPU time of the last frame's render pass in milliseconds, from timestamp queries written at
+    /// its beginning and end (resolved in the frame's own submission, read with its readback);
+    /// `None` before the first frame or when the device has no
+    /// [`wgpu::Features::TIMESTAMP_QUERY`]. On Mesa's software rasterizers this is the time the
+    /// rasterizer took for the pass (see `examples/frame_timing.rs`).
+    pub fn last_gpu_ms(&self) -> Option<f64> {
+        self.last_gpu.get()
+    }
+
+    fn draw(
+        &self,
+        scene: &GpuScene,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
         let (width, height) = (view.width, view.height);
         if width == 0 || height == 0 || width > self.max_dim || height > self.max_dim {
             return Err(GpuError::Limit(format!(
@@ -233,7 +268,7 @@ impl Renderer {
                     label: Some("lemi render"),
                 });
             {
-                let mut pass = targets.begin_pass(&mut encoder, "lemi reference pass");
+                let mut pass = targets.begin_timed_pass(&mut encoder, "lemi reference pass");
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
@@ -249,57 +284,47 @@ impl Renderer {
                     pass.draw_indexed(0..chunk.index_count, 0, 0..1);
                 }
             }
-            targets.copy_to_readback(&mut encoder);
+            targets.resolve_timer(&mut encoder);
+            if readback {
+                targets.copy_to_readback(&mut encoder);
+            }
             self.queue.submit([encoder.finish()]);
         })?;
-        let (mut rgba, mut depth) = targets.read(&self.device)?;
+        if !readback {
+            self.last_gpu
+                .set(targets.read_timer(&self.device, &self.queue)?);
+            return Ok(None);
+        }
         // The depth target is cleared to 0; the colour alpha (255 where a fragment was written, 0
         // after the clear) tells geometry from background.
-        for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
-            if px[3] == 0 {
-                px.copy_from_slice(&options.clear);
-                *d = f32::INFINITY;
-            }
-        }
-        Ok(Frame {
-            width,
-            height,
-            rgba,
-            depth,
-        })
+        let (frame, ms) = targets.read_frame(&self.device, &self.queue, options.clear)?;
+        self.last_gpu.set(ms);
+        Ok(Some(frame))
     }
 }
 
-/// Maps a readback buffer of `width × height` 4-byte texels and strips the row padding.
-pub(crate) fn read_rows(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    width: u32,
-    height: u32,
-) -> Result<Vec<u8>, GpuError> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let padded = padded_bytes_per_row(width, 4) as usize;
-    let row = width as usize * 4;
-    let mut out = Vec::with_capacity(row * height as usize);
-    {
-        let view = buffer
-            .get_mapped_range(..)
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        for r in view.chunks(padded).take(height as usize) {
-            out.extend_from_slice(&r[..row]);
+/// The last frame's GPU time in milliseconds (f64 bits; `u64::MAX` for none), shared by reference.
+#[derive(Debug)]
+pub(crate) struct GpuTime(AtomicU64);
+
+impl Default for GpuTime {
+    fn default() -> Self {
+        GpuTime(AtomicU64::new(u64::MAX))
+    }
+}
+
+impl GpuTime {
+    pub(crate) fn get(&self) -> Option<f64> {
+        match self.0.load(Ordering::Relaxed) {
+            u64::MAX => None,
+            bits => Some(f64::from_bits(bits)),
         }
     }
-    buffer.unmap();
-    Ok(out)
+
+    pub(crate) fn set(&self, ms: Option<f64>) {
+        self.0
+            .store(ms.map_or(u64::MAX, f64::to_bits), Ordering::Relaxed);
+    }
 }
 
 #[cfg(test)]

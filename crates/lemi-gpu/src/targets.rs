@@ -2,14 +2,44 @@
 //! linear view-depth image (`R32Uint` holding f32 bits, renderable on every backend) and a reverse-Z
 //! depth buffer, plus the two readback buffers. The reference renderer, the layer recorder and the
 //! impostor renderer share them, so their passes clear, store and read back identically.
+//!
+//! Also: an `Rgba8Unorm` view of the colour texture where the backend has view formats (the
+//! impostor quads store their sRGB-encoded texels through it unchanged), and, on devices with
+//! timestamp queries, two timestamps around a frame's passes, resolved in the frame's own
+//! submission and read back with its images in the same wait ([`Targets::read_frame`]). The
+//! readback maps all buffers at once and strips row padding, converts depth and fixes the
+//! background in one pass over the rows.
 
-use crate::renderer::{
-    padded_bytes_per_row, read_rows, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
-};
+use crate::renderer::{padded_bytes_per_row, Frame, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
 use crate::GpuError;
+
+/// The colour texture's second view format: the same bytes without sRGB encoding.
+pub(crate) const LINEAR_COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+/// Which part of a frame a pass is ([`Targets::begin_pass_part`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum PassPart {
+    /// The whole frame in one pass: clear, draw, keep colour and view depth.
+    Whole,
+    /// The first of two passes: clear, draw, keep all three targets.
+    First,
+    /// The second of two passes: load, draw, keep colour and view depth.
+    Last,
+}
+
+/// Whether a colour texture on `device` can be rendered through an `Rgba8Unorm` view as well as
+/// its `Rgba8UnormSrgb` format (wgpu's `DownlevelFlags::VIEW_FORMATS`, which only the GL backend
+/// lacks).
+pub(crate) fn linear_views_supported(device: &wgpu::Device) -> bool {
+    device.adapter_info().backend != wgpu::Backend::Gl
+}
 
 /// Render targets and readback buffers of one size.
 pub(crate) struct Targets {
+    /// An `Rgba8Unorm` view of the colour texture, where the backend allows it.
+    color_linear: Option<wgpu::TextureView>,
+    /// Timestamps around a pass, when the device has [`wgpu::Features::TIMESTAMP_QUERY`].
+    timer: Option<PassTimer>,
     pub(crate) width: u32,
     pub(crate) height: u32,
     color: wgpu::TextureView,
@@ -29,7 +59,8 @@ impl Targets {
             height,
             depth_or_array_layers: 1,
         };
-        let tex = |what: &str, format, usage| {
+        let linear = linear_views_supported(device);
+        let tex = |what: &str, format, usage, view_formats: &[wgpu::TextureFormat]| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(&format!("{label} {what}")),
                 size,
@@ -38,7 +69,7 @@ impl Targets {
                 dimension: wgpu::TextureDimension::D2,
                 format,
                 usage,
-                view_formats: &[],
+                view_formats,
             })
         };
         let rt = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC;
@@ -50,14 +81,29 @@ impl Targets {
                 mapped_at_creation: false,
             })
         };
-        let color_texture = tex("colour", COLOR_FORMAT, rt);
-        let view_depth_texture = tex("view depth", VIEW_DEPTH_FORMAT, rt);
+        let linear_format = [LINEAR_COLOR_FORMAT];
+        let color_texture = tex(
+            "colour",
+            COLOR_FORMAT,
+            rt,
+            if linear { &linear_format } else { &[] },
+        );
+        let view_depth_texture = tex("view depth", VIEW_DEPTH_FORMAT, rt, &[]);
         let depth = tex(
             "depth",
             DEPTH_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT,
+            &[],
         );
         Targets {
+            color_linear: linear.then(|| {
+                color_texture.create_view(&wgpu::TextureViewDescriptor {
+                    label: Some(&format!("{label} colour (linear view)")),
+                    format: Some(LINEAR_COLOR_FORMAT),
+                    ..Default::default()
+                })
+            }),
+            timer: PassTimer::new(device, label),
             width,
             height,
             color: color_texture.create_view(&Default::default()),
@@ -76,35 +122,96 @@ impl Targets {
         encoder: &'e mut wgpu::CommandEncoder,
         label: &str,
     ) -> wgpu::RenderPass<'e> {
-        let clear = wgpu::Operations {
-            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+        self.begin_pass_part(encoder, label, PassPart::Whole, false, false)
+    }
+
+    /// Like [`Targets::begin_pass`], with timestamps written at the beginning and the end of the
+    /// pass when the device supports them; [`Targets::resolve_timer`] after the pass and
+    /// [`Targets::read_frame`] (or [`Targets::read_timer`]) turn them into milliseconds.
+    pub(crate) fn begin_timed_pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        label: &str,
+    ) -> wgpu::RenderPass<'e> {
+        self.begin_pass_part(encoder, label, PassPart::Whole, false, true)
+    }
+
+    /// Whether the colour target also has a linear (`Rgba8Unorm`) view, see
+    /// [`Targets::begin_pass_part`].
+    pub(crate) fn has_linear_color(&self) -> bool {
+        self.color_linear.is_some()
+    }
+
+    /// One pass of a frame drawn in one ([`PassPart::Whole`]) or two passes ([`PassPart::First`]
+    /// clears and keeps the depth buffer, [`PassPart::Last`] loads everything). `linear_color`
+    /// renders colour through the `Rgba8Unorm` view of the sRGB colour texture, so fragment
+    /// outputs are stored as they are, without sRGB encoding (ignored without such a view,
+    /// [`Targets::has_linear_color`]). `timed`: the frame's timestamps (beginning in the first
+    /// part, end in the last).
+    pub(crate) fn begin_pass_part<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        label: &str,
+        part: PassPart,
+        linear_color: bool,
+        timed: bool,
+    ) -> wgpu::RenderPass<'e> {
+        let first = matches!(part, PassPart::Whole | PassPart::First);
+        let last = matches!(part, PassPart::Whole | PassPart::Last);
+        let timestamp_writes =
+            self.timer
+                .as_ref()
+                .filter(|_| timed)
+                .map(|t| wgpu::RenderPassTimestampWrites {
+                    query_set: &t.queries,
+                    beginning_of_pass_write_index: first.then_some(0),
+                    end_of_pass_write_index: last.then_some(1),
+                });
+        let color_ops = wgpu::Operations {
+            load: if first {
+                wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
+            } else {
+                wgpu::LoadOp::Load
+            },
             store: wgpu::StoreOp::Store,
+        };
+        let color_view = match (&self.color_linear, linear_color) {
+            (Some(v), true) => v,
+            _ => &self.color,
         };
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some(label),
             color_attachments: &[
                 Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color,
+                    view: color_view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: clear,
+                    ops: color_ops,
                 }),
                 Some(wgpu::RenderPassColorAttachment {
                     view: &self.view_depth,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: clear,
+                    ops: color_ops,
                 }),
             ],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &self.depth,
                 depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(0.0),
-                    store: wgpu::StoreOp::Discard,
+                    load: if first {
+                        wgpu::LoadOp::Clear(0.0)
+                    } else {
+                        wgpu::LoadOp::Load
+                    },
+                    store: if last {
+                        wgpu::StoreOp::Discard
+                    } else {
+                        wgpu::StoreOp::Store
+                    },
                 }),
                 stencil_ops: None,
             }),
-            timestamp_writes: None,
+            timestamp_writes,
             occlusion_query_set: None,
             multiview_mask: None,
         })
@@ -140,13 +247,199 @@ impl Targets {
         }
     }
 
+    /// Resolves the pass timestamps into the timer's readback buffer (after the pass, in the same
+    /// encoder as [`Targets::copy_to_readback`], so reading them costs no extra submission).
+    pub(crate) fn resolve_timer(&self, encoder: &mut wgpu::CommandEncoder) {
+        if let Some(t) = &self.timer {
+            encoder.resolve_query_set(&t.queries, 0..2, &t.resolve, 0);
+            encoder.copy_buffer_to_buffer(&t.resolve, 0, &t.readback, 0, Some(TIMER_BYTES));
+        }
+    }
+
     /// Reads back the colour (RGBA8, as rendered) and the view depth (f32) after submission.
     pub(crate) fn read(&self, device: &wgpu::Device) -> Result<(Vec<u8>, Vec<f32>), GpuError> {
-        let rgba = read_rows(device, &self.color_readback, self.width, self.height)?;
-        let depth = read_rows(device, &self.depth_readback, self.width, self.height)?
+        map_all(device, &[&self.color_readback, &self.depth_readback])?;
+        let rgba = unpad_rows(&self.color_readback, self.width, self.height);
+        let depth = unpad_rows(&self.depth_readback, self.width, self.height);
+        self.color_readback.unmap();
+        self.depth_readback.unmap();
+        let rgba = rgba?;
+        let depth = depth?
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
         Ok((rgba, depth))
     }
+
+    /// Reads back a [`Frame`] after submission: colour and view depth, with pixels no fragment was
+    /// written to (colour alpha 0 after the clear; every lemi fragment writes alpha 1) set to
+    /// `clear` and depth `f32::INFINITY`; plus the pass's GPU time in milliseconds when the pass
+    /// was timed ([`Targets::begin_timed_pass`], [`Targets::resolve_timer`]) on a device with
+    /// timestamp queries. One wait for all three buffers.
+    pub(crate) fn read_frame(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        clear: [u8; 4],
+    ) -> Result<(Frame, Option<f64>), GpuError> {
+        let mut buffers = vec![&self.color_readback, &self.depth_readback];
+        if let Some(t) = &self.timer {
+            buffers.push(&t.readback);
+        }
+        map_all(device, &buffers)?;
+        let frame = self.extract_frame(clear);
+        let ms = self.timer.as_ref().map(|t| t.elapsed_ms(queue));
+        for b in buffers {
+            b.unmap();
+        }
+        Ok((frame?, ms.flatten()))
+    }
+
+    /// The pass's GPU time in milliseconds (after submission of a timed and resolved pass), without
+    /// reading the images; `None` without timestamp queries.
+    pub(crate) fn read_timer(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Option<f64>, GpuError> {
+        let Some(t) = &self.timer else {
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            return Ok(None);
+        };
+        map_all(device, &[&t.readback])?;
+        let ms = t.elapsed_ms(queue);
+        t.readback.unmap();
+        Ok(ms)
+    }
+
+    /// Colour and depth out of the mapped readback buffers, rows unpadded, background fixed.
+    fn extract_frame(&self, clear: [u8; 4]) -> Result<Frame, GpuError> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let padded = padded_bytes_per_row(self.width, 4) as usize;
+        let colour = self
+            .color_readback
+            .get_mapped_range(..)
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let depth_bytes = self
+            .depth_readback
+            .get_mapped_range(..)
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let mut rgba = Vec::with_capacity(4 * w * h);
+        let mut depth: Vec<f32> = Vec::with_capacity(w * h);
+        for y in 0..h {
+            let row = y * padded..y * padded + 4 * w;
+            let start = rgba.len();
+            rgba.extend_from_slice(&colour[row.clone()]);
+            depth.extend(
+                depth_bytes[row]
+                    .chunks_exact(4)
+                    .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            );
+            let d0 = depth.len() - w;
+            for (px, d) in rgba[start..]
+                .chunks_exact_mut(4)
+                .zip(depth[d0..].iter_mut())
+            {
+                if px[3] == 0 {
+                    px.copy_from_slice(&clear);
+                    *d = f32::INFINITY;
+                }
+            }
+        }
+        Ok(Frame {
+            width: self.width,
+            height: self.height,
+            rgba,
+            depth,
+        })
+    }
+}
+
+/// Bytes of the two resolved timestamps.
+const TIMER_BYTES: u64 = 2 * wgpu::QUERY_SIZE as u64;
+
+/// Two timestamp queries (beginning and end of one pass) and the buffers to read them back.
+struct PassTimer {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    readback: wgpu::Buffer,
+}
+
+impl PassTimer {
+    /// `None` unless the device was opened with [`wgpu::Features::TIMESTAMP_QUERY`].
+    fn new(device: &wgpu::Device, label: &str) -> Option<PassTimer> {
+        if !device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return None;
+        }
+        let buffer = |what: &str, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(&format!("{label} timestamps {what}")),
+                size: TIMER_BYTES,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Some(PassTimer {
+            queries: device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some(&format!("{label} pass timestamps")),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolve: buffer(
+                "resolve",
+                wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+            ),
+            readback: buffer(
+                "readback",
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            ),
+        })
+    }
+
+    /// End minus beginning in milliseconds, from the mapped readback buffer; `None` when the
+    /// values are unusable (end before beginning, or the buffer cannot be read).
+    fn elapsed_ms(&self, queue: &wgpu::Queue) -> Option<f64> {
+        let bytes = self.readback.get_mapped_range(..).ok()?;
+        let t: &[u64] = bytemuck::try_cast_slice(&bytes).ok()?;
+        let (begin, end) = (*t.first()?, *t.get(1)?);
+        let ticks = end.checked_sub(begin)?;
+        Some(ticks as f64 * queue.get_timestamp_period() as f64 * 1e-6)
+    }
+}
+
+/// Maps every buffer for reading and waits once for all of them.
+fn map_all(device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> Result<(), GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    for b in buffers {
+        let tx = tx.clone();
+        b.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+    }
+    drop(tx);
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    for _ in buffers {
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// The rows of a mapped readback buffer of `width × height` 4-byte texels, padding stripped.
+fn unpad_rows(buffer: &wgpu::Buffer, width: u32, height: u32) -> Result<Vec<u8>, GpuError> {
+    let padded = padded_bytes_per_row(width, 4) as usize;
+    let row = width as usize * 4;
+    let view = buffer
+        .get_mapped_range(..)
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let mut out = Vec::with_capacity(row * height as usize);
+    for r in view.chunks(padded).take(height as usize) {
+        out.extend_from_slice(&r[..row]);
+    }
+    Ok(out)
 }

@@ -1,0 +1,461 @@
+//! Frame timing of the impostor renderer against the reference renderer (all geometry) on a baked
+//! bundle: for every cell, views from the cell centre along +X, −X, +Z, −Z (1280×720, 60°
+//! horizontal field of view unless told otherwise), each rendered in turn, alternating, by
+//!
+//! - `ImpostorRenderer::render` (near geometry + quads, with the readback of colour and depth),
+//! - `ImpostorRenderer::render_no_readback` (the same passes, waited for, nothing read back),
+//! - `Renderer::render` and `Renderer::render_no_readback` with the whole scene,
+//!
+//! and prints medians of the wall-clock times and of the GPU times from timestamp queries
+//! (`last_gpu_ms`, when the adapter has them), and the mean process CPU time per frame (all
+//! threads, which on a software rasterizer is the rendering work itself, and which other
+//! processes on a shared machine disturb less than wall-clock time).
+//!
+//! ```text
+//! cargo run --release -p lemi-gpu --example frame_timing -- [BUNDLE] [--reps N] [--cells K]
+//!     [--size WxH] [--fov DEG] [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]
+//! ```
+//!
+//! `BUNDLE` defaults to `/tmp/bw` (the scene is rebuilt from the manifest's sources). `--cells K`
+//! takes the first K cells, `--reps N` times every view N times. `--save DIR` writes every view's
+//! frames (raw RGBA8 + f32 depth) to `DIR`; `--check DIR` compares the frames with those saved
+//! earlier and prints how many pixels differ (to check that an optimisation changes no pixel).
+//! `--no-geometry` skips the reference renderer; `--parts` also reports the GPU time of the
+//! quads alone (`render_impostors_only`) and of the near geometry alone (drawn by the reference
+//! renderer); `--stats` prints how much of each face image the quads cover.
+//!
+//! What the GPU time measures on Mesa's lavapipe (Vulkan on llvmpipe): the rasterization itself,
+//! not only command submission. The timestamp written at the end of the pass is taken when the
+//! rasterizer threads have finished it, so the GPU time is 97–100 % of the wall-clock time of
+//! `render_no_readback` (encode, submit, wait), and the output's last lines show the ratio.
+//! `render` minus `render_no_readback` is the readback: copying colour and view depth to
+//! buffers, mapping them and building the `Frame` (about 3 ms at 1280×720). llvmpipe's GL has no
+//! timestamp queries (`gpu` shows `-`).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+use lemi_core::bundle::{CellFile, Manifest};
+use lemi_core::camera::{Camera, View};
+use lemi_gpu::{
+    BackendChoice, Frame, Gpu, GpuGeometry, GpuScene, ImpostorCell, ImpostorRenderer,
+    RenderOptions, Renderer, UploadOptions,
+};
+
+type Error = Box<dyn std::error::Error>;
+
+struct Args {
+    bundle: PathBuf,
+    reps: usize,
+    cells: Option<usize>,
+    width: u32,
+    height: u32,
+    fov_x: f64,
+    save: Option<PathBuf>,
+    check: Option<PathBuf>,
+    /// Skip the reference renderer (for profiling the impostor frame).
+    no_geometry: bool,
+    /// Also time `render_impostors_only` (the quads without the near geometry).
+    parts: bool,
+    /// Print per face how much of the face image the quads cover (depth complexity in texels).
+    stats: bool,
+}
+
+fn parse_args() -> Result<Args, Error> {
+    let mut a = Args {
+        bundle: PathBuf::from("/tmp/bw"),
+        reps: 3,
+        cells: None,
+        width: 1280,
+        height: 720,
+        fov_x: 60.0,
+        save: None,
+        check: None,
+        no_geometry: false,
+        parts: false,
+        stats: false,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut value = || it.next().ok_or_else(|| format!("{arg} needs a value"));
+        match arg.as_str() {
+            "--reps" => a.reps = value()?.parse()?,
+            "--cells" => a.cells = Some(value()?.parse()?),
+            "--fov" => a.fov_x = value()?.parse()?,
+            "--size" => {
+                let v = value()?;
+                let (w, h) = v.split_once('x').ok_or("--size wants WxH")?;
+                a.width = w.parse()?;
+                a.height = h.parse()?;
+            }
+            "--save" => a.save = Some(value()?.into()),
+            "--check" => a.check = Some(value()?.into()),
+            "--no-geometry" => a.no_geometry = true,
+            "--parts" => a.parts = true,
+            "--stats" => a.stats = true,
+            "-h" | "--help" => {
+                println!(
+                    "frame_timing [BUNDLE] [--reps N] [--cells K] [--size WxH] [--fov DEG] \
+                     [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]"
+                );
+                std::process::exit(0);
+            }
+            s if s.starts_with("--") => return Err(format!("unknown option {s}").into()),
+            s => a.bundle = s.into(),
+        }
+    }
+    if a.reps == 0 {
+        return Err("--reps must be at least 1".into());
+    }
+    Ok(a)
+}
+
+fn median(v: &[f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    Some(if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    })
+}
+
+fn fmt(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".to_string(), |v| format!("{v:.2}"))
+}
+
+/// Timings of one renderer.
+#[derive(Default)]
+struct Series {
+    /// `render` wall-clock (with readback).
+    wall: Vec<f64>,
+    /// GPU time reported after `render`.
+    gpu: Vec<f64>,
+    /// `render_no_readback` wall-clock.
+    no_readback: Vec<f64>,
+    /// GPU time reported after `render_no_readback`.
+    gpu_no_readback: Vec<f64>,
+    /// Process CPU time (all threads, so the software rasterizer's too) of `render` and
+    /// `render_no_readback`, summed, in ms: less sensitive than wall-clock to other processes
+    /// on a shared machine. Clock-tick resolution per call, so only the mean over many is good.
+    cpu: f64,
+    cpu_no_readback: f64,
+}
+
+impl Series {
+    fn row(&self, name: &str) -> String {
+        let n = self.wall.len().max(1) as f64;
+        format!(
+            "{name:<10} {:>10} {:>10} {:>12} {:>12} {:>10} {:>12}   ({} frames)",
+            fmt(median(&self.wall)),
+            fmt(median(&self.gpu)),
+            fmt(median(&self.no_readback)),
+            fmt(median(&self.gpu_no_readback)),
+            fmt(Some(self.cpu / n)),
+            fmt(Some(self.cpu_no_readback / n)),
+            self.wall.len()
+        )
+    }
+}
+
+/// CPU time of this process (user + system, all threads) in ms, from `/proc/self/stat`; 0 where
+/// that does not exist.
+fn cpu_ms() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    // Linux reports these in USER_HZ = 100 ticks per second.
+    (ticks(11) + ticks(12)) * 10.0
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+fn frame_bytes(f: &Frame) -> Vec<u8> {
+    let mut out = f.rgba.clone();
+    for d in &f.depth {
+        out.extend_from_slice(&d.to_le_bytes());
+    }
+    out
+}
+
+/// Pixels whose colour or depth bits differ between `f` and the saved `bytes`.
+fn differing_pixels(f: &Frame, bytes: &[u8]) -> usize {
+    let n = f.rgba.len() / 4;
+    if bytes.len() != 8 * n {
+        return n;
+    }
+    let (c, d) = bytes.split_at(4 * n);
+    (0..n)
+        .filter(|&i| {
+            f.rgba[4 * i..4 * i + 4] != c[4 * i..4 * i + 4]
+                || f.depth[i].to_le_bytes() != d[4 * i..4 * i + 4]
+        })
+        .count()
+}
+
+fn save_or_check(args: &Args, name: &str, f: &Frame, diffs: &mut Vec<(String, usize)>) {
+    if let Some(dir) = &args.save {
+        let _ = std::fs::create_dir_all(dir);
+        if let Err(e) = std::fs::write(dir.join(name), frame_bytes(f)) {
+            eprintln!("warning: saving {name}: {e}");
+        }
+    }
+    if let Some(dir) = &args.check {
+        match std::fs::read(dir.join(name)) {
+            Ok(b) => diffs.push((name.to_string(), differing_pixels(f, &b))),
+            Err(e) => eprintln!("warning: no saved {name}: {e}"),
+        }
+    }
+}
+
+fn view(eye: DVec3, dir: DVec3, args: &Args) -> Result<View, Error> {
+    let aspect = args.width as f64 / args.height as f64;
+    let fov_y = 2.0 * ((args.fov_x.to_radians() / 2.0).tan() / aspect).atan();
+    Ok(Camera::new(
+        eye,
+        dir,
+        DVec3::Y,
+        fov_y.to_degrees(),
+        args.width,
+        args.height,
+    )?
+    .view())
+}
+
+/// The near list's triangles as one mesh per source mesh.
+fn near_meshes(scene: &lemi_core::Scene, near: &[[u32; 2]]) -> Vec<lemi_core::Mesh> {
+    let mut out: Vec<lemi_core::Mesh> = Vec::new();
+    let mut sorted = near.to_vec();
+    sorted.sort_by_key(|p| p[0]);
+    for group in sorted.chunk_by(|a, b| a[0] == b[0]) {
+        let Some(src) = scene.meshes.get(group[0][0] as usize) else {
+            continue;
+        };
+        let mut mesh = lemi_core::Mesh {
+            material: src.material,
+            vertices: Vec::new(),
+            indices: Vec::new(),
+        };
+        for &[_, t] in group {
+            for &i in src
+                .indices
+                .get(3 * t as usize..3 * t as usize + 3)
+                .unwrap_or(&[])
+            {
+                mesh.indices.push(mesh.vertices.len() as u32);
+                mesh.vertices.push(src.vertices[i as usize]);
+            }
+        }
+        out.push(mesh);
+    }
+    out
+}
+
+fn opaque_quads(cell: &ImpostorCell) -> String {
+    format!("{} opaque", cell.opaque_quad_count())
+}
+
+fn main() -> Result<(), Error> {
+    let args = parse_args()?;
+    let gpu = Gpu::new(BackendChoice::Auto)?;
+    println!(
+        "adapter: {}; timestamp queries: {}",
+        gpu.describe(),
+        gpu.has_timestamps()
+    );
+    let manifest = Manifest::read(&args.bundle)?;
+    let t = Instant::now();
+    let scene = lemi_scene::load(&manifest.scene.sources, &lemi_scene::LoadOptions::default())?;
+    println!(
+        "scene {} ({} triangles) loaded in {:.1} s",
+        manifest.scene.sources.join(" "),
+        scene.triangle_count(),
+        t.elapsed().as_secs_f64()
+    );
+    let all = GpuScene::upload(&gpu, &scene, &UploadOptions::default())?;
+    let materials = Arc::clone(&all.materials);
+    let impostors = ImpostorRenderer::new(&gpu)?;
+    let reference = Renderer::new(&gpu)?;
+    let options = RenderOptions::default();
+    let dirs = [
+        ("px", DVec3::X),
+        ("nx", -DVec3::X),
+        ("pz", DVec3::Z),
+        ("nz", -DVec3::Z),
+    ];
+    let (mut imp, mut geo) = (Series::default(), Series::default());
+    let (mut quads_only, mut near_only) = (Vec::new(), Vec::new());
+    let mut diffs = Vec::new();
+    let cells = args.cells.unwrap_or(manifest.cells.len());
+    for entry in manifest.cells.iter().take(cells) {
+        let file = CellFile::read(&args.bundle.join(Path::new(&entry.file)))?;
+        let macros = file.decode_macros()?;
+        let cell = ImpostorCell::upload(
+            &gpu,
+            Arc::clone(&materials),
+            &scene,
+            &file.near,
+            &file.header.quads,
+            &macros,
+        )?;
+        let eye = file.header.cell.center;
+        // The near geometry alone, as a scene for the reference renderer (same shading).
+        let near_scene = if args.parts {
+            let meshes = near_meshes(&scene, &file.near);
+            let geometry = GpuGeometry::upload(&gpu, &meshes, &UploadOptions::default())?;
+            Some(GpuScene::from_parts(Arc::clone(&materials), geometry)?)
+        } else {
+            None
+        };
+        if args.stats {
+            let res = file.header.resolution as f64;
+            for f in &file.header.faces {
+                let qs: Vec<_> = file.header.quads.iter().filter(|q| q.face == *f).collect();
+                let area: f64 = qs.iter().map(|q| (q.rect[2] * q.rect[3]) as f64).sum();
+                let mut opaque_texels = 0u64;
+                for q in &qs {
+                    let m = &macros[q.macro_index as usize];
+                    for y in q.rect[1]..q.rect[1] + q.rect[3] {
+                        for x in q.rect[0]..q.rect[0] + q.rect[2] {
+                            if m.rgba[(4 * (y * m.width + x) + 3) as usize] >= 128 {
+                                opaque_texels += 1;
+                            }
+                        }
+                    }
+                }
+                println!(
+                    "  face {f:?}: {} quads covering {:.2} x the face's texels, {:.2} x in opaque \
+                     texels",
+                    qs.len(),
+                    area / (res * res),
+                    opaque_texels as f64 / (res * res),
+                );
+            }
+        }
+        let mut cell_imp = Vec::new();
+        for (dname, dir) in dirs {
+            let v = view(eye, dir, &args)?;
+            // Warm-up (pipelines, targets) and the frames to save or check.
+            let f = impostors.render(&cell, &v, &options)?;
+            save_or_check(
+                &args,
+                &format!("{}_{dname}_imp.bin", entry.id),
+                &f,
+                &mut diffs,
+            );
+            if !args.no_geometry {
+                let g = reference.render(&all, &v, &options)?;
+                let name = format!("{}_{dname}_geo.bin", entry.id);
+                save_or_check(&args, &name, &g, &mut diffs);
+            }
+            for _ in 0..args.reps {
+                let (t, c) = (Instant::now(), cpu_ms());
+                let f = impostors.render(&cell, &v, &options)?;
+                imp.cpu += cpu_ms() - c;
+                imp.wall.push(ms_since(t));
+                cell_imp.push(ms_since(t));
+                drop(f);
+                imp.gpu.extend(impostors.last_gpu_ms());
+                let (t, c) = (Instant::now(), cpu_ms());
+                impostors.render_no_readback(&cell, &v, &options)?;
+                imp.cpu_no_readback += cpu_ms() - c;
+                imp.no_readback.push(ms_since(t));
+                imp.gpu_no_readback.extend(impostors.last_gpu_ms());
+                if let Some(near) = &near_scene {
+                    impostors.render_impostors_only(&cell, &v, &options)?;
+                    quads_only.extend(impostors.last_gpu_ms());
+                    reference.render_no_readback(near, &v, &options)?;
+                    near_only.extend(reference.last_gpu_ms());
+                }
+                if args.no_geometry {
+                    continue;
+                }
+                let (t, c) = (Instant::now(), cpu_ms());
+                let g = reference.render(&all, &v, &options)?;
+                geo.cpu += cpu_ms() - c;
+                geo.wall.push(ms_since(t));
+                drop(g);
+                geo.gpu.extend(reference.last_gpu_ms());
+                let (t, c) = (Instant::now(), cpu_ms());
+                reference.render_no_readback(&all, &v, &options)?;
+                geo.cpu_no_readback += cpu_ms() - c;
+                geo.no_readback.push(ms_since(t));
+                geo.gpu_no_readback.extend(reference.last_gpu_ms());
+            }
+        }
+        println!(
+            "cell {:>7}: {:>6} near triangles, {:>6} quads ({}) in {:>3} draws; impostor frame \
+             median {} ms",
+            entry.id,
+            cell.near_triangles(),
+            cell.quad_count(),
+            opaque_quads(&cell),
+            cell.quad_draw_calls(),
+            fmt(median(&cell_imp))
+        );
+    }
+    println!(
+        "\nmedians in ms over {cells} cells x 4 views x {} reps, {}x{}, {}° horizontal fov",
+        args.reps, args.width, args.height, args.fov_x
+    );
+    println!(
+        "{:<10} {:>10} {:>10} {:>12} {:>12} {:>10} {:>12}",
+        "", "render", "gpu", "no-readback", "gpu(no-rb)", "cpu", "cpu(no-rb)"
+    );
+    println!("{}", imp.row("impostor"));
+    println!("{}", geo.row("geometry"));
+    if args.parts {
+        println!(
+            "gpu time of the parts: quads only (render_impostors_only) {} ms, near geometry only \
+             {} ms",
+            fmt(median(&quads_only)),
+            fmt(median(&near_only))
+        );
+    }
+    if let (Some(i), Some(g)) = (median(&imp.wall), median(&geo.wall)) {
+        println!("speed-up (render, with readback): {:.2}x", g / i);
+    }
+    if let (Some(i), Some(g)) = (median(&imp.no_readback), median(&geo.no_readback)) {
+        println!("speed-up (no readback):           {:.2}x", g / i);
+    }
+    if let (Some(i), Some(g)) = (median(&imp.gpu), median(&geo.gpu)) {
+        println!("speed-up (gpu time):              {:.2}x", g / i);
+    }
+    for (name, s) in [("impostor", &imp), ("geometry", &geo)] {
+        if let (Some(w), Some(n), Some(gp)) = (
+            median(&s.wall),
+            median(&s.no_readback),
+            median(&s.gpu_no_readback),
+        ) {
+            println!(
+                "{name}: readback costs {:.2} ms; gpu time is {:.0}% of the no-readback wall time",
+                w - n,
+                100.0 * gp / n
+            );
+        }
+    }
+    if args.check.is_some() {
+        let bad: Vec<_> = diffs.iter().filter(|(_, n)| *n > 0).collect();
+        println!(
+            "\ncheck: {} frames compared, {} differ",
+            diffs.len(),
+            bad.len()
+        );
+        for (name, n) in bad {
+            println!("  {name}: {n} pixels differ");
+        }
+    }
+    Ok(())
+}
