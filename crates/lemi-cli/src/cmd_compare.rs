@@ -245,11 +245,8 @@ pub fn run(args: Args) -> Result<()> {
             StrategyKind::Lemi
         };
         match bake_of(baked) {
-            Some((_, Ok(v))) => {
-                if k.is_layered() {
-                    row.bake = Some(v.clone());
-                }
-            }
+            Some((_, Ok(v))) if k.is_layered() => row.bake = Some(v.clone()),
+            Some((_, Ok(_))) => {}
             Some((_, Err(e))) => {
                 row.errors.push(format!("{e:#}"));
                 rows.push(row);
@@ -465,22 +462,23 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
     if let Some(r) = rows.iter().find_map(|r| r.walk.as_ref()) {
         let _ = writeln!(
             m,
-            "Walk: {} frames at {}×{}, adapter {}. Every strategy replays the same path; the all-geometry replay of that path: median {} ms, p99 {} ms.\n",
+            "Walk: {} frames at {}×{}, adapter {}. Every strategy replays the same path; the all-geometry replay of that path: median {} ms, p99 {} ms, GPU median {} ms.\n",
             r["frames"],
             r["size"][0],
             r["size"][1],
             r["adapter"].as_str().unwrap_or("?"),
             fmt_ms(geometry.and_then(|g| num(g, "geometry_median_ms"))),
             fmt_ms(geometry.and_then(|g| num(g, "geometry_p99_ms"))),
+            fmt_ms(geometry.and_then(|g| num(g, "geometry_gpu_median_ms"))),
         );
     }
     let _ = writeln!(
         m,
-        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | speed-up | stalls | regenerations | far-field pixels | max px | p99 px | crack px | mean FLIP |"
+        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | GPU median ms | speed-up | stalls | regenerations | far-field pixels | max px | p99 px | crack px | mean FLIP |"
     );
     let _ = writeln!(
         m,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let geo_median = geometry.and_then(|g| num(g, "geometry_median_ms"));
     for r in rows {
@@ -541,13 +539,14 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
         });
         let _ = writeln!(
             m,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             bake_s.unwrap_or_else(|| "–".into()),
             disk,
             fmt_bytes(walk.and_then(|w| num(w, "texture_bytes_per_cell"))),
             fmt_ms(median),
             fmt_ms(walk.and_then(|w| num(w, "impostor_p99_ms"))),
+            fmt_ms(walk.and_then(|w| num(w, "impostor_gpu_median_ms"))),
             speedup,
             walk.and_then(|w| w.get("stalls"))
                 .map_or("–".into(), |v| v.to_string()),
@@ -567,6 +566,8 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
         "\nColumns: *bake s/cell* and *disk/cell* from `lemi bake --json` (seconds and bytes over \
          the cells baked); *texture memory/cell*: bytes of far-field textures the runtime held for \
          one cell; *median/p99 ms*: wall-clock frame time of the walk (readback included), \
+         *GPU median ms*: the render passes alone (timestamp queries; only for strategies whose \
+         frame is all GPU work), \
          *speed-up*: all-geometry median over the strategy's median; *stalls*: frames that waited \
          for a cell; *regenerations*: impostors regenerated (dynamic) or far fields recorded at \
          run time (warp); *far-field pixels*: share of the evaluated pixels drawn by the far field (the rest is near \

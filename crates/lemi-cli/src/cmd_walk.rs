@@ -238,7 +238,7 @@ pub fn run(args: Args) -> Result<()> {
             t: *t,
             mode: Mode::Impostor,
             cpu_ms,
-            gpu_ms: None,
+            gpu_ms: f.gpu_ms,
             near_triangles: f.near_triangles,
             impostor_quads: f.far_primitives,
             total_triangles: if f.fallback {
@@ -283,7 +283,7 @@ pub fn run(args: Args) -> Result<()> {
                 t: *t,
                 mode: Mode::Geometry,
                 cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
-                gpu_ms: None,
+                gpu_ms: renderer.last_gpu_ms(),
                 near_triangles: 0,
                 impostor_quads: 0,
                 total_triangles,
@@ -357,6 +357,17 @@ pub fn run(args: Args) -> Result<()> {
             ms(summary.geometry_p99_ms),
             summary
                 .speedup_median
+                .map_or("-".to_string(), |s| format!("{s:.1}x"))
+        );
+    }
+    if summary.impostor_gpu_median_ms.is_some() || summary.geometry_gpu_median_ms.is_some() {
+        println!(
+            "gpu time   median {} ({}), {} (all geometry); speed-up {}",
+            ms(summary.impostor_gpu_median_ms),
+            kind.name(),
+            ms(summary.geometry_gpu_median_ms),
+            summary
+                .speedup_gpu_median
                 .map_or("-".to_string(), |s| format!("{s:.1}x"))
         );
     }

@@ -32,7 +32,12 @@ fn assert_clean_error(o: &Output, needle: &str) {
 
 #[test]
 fn unknown_strategy_names_are_rejected_clearly() {
-    let o = lemi(&["compare", "builtin:city:20k:3", "--strategies", "lemi,billboards"]);
+    let o = lemi(&[
+        "compare",
+        "builtin:city:20k:3",
+        "--strategies",
+        "lemi,billboards",
+    ]);
     assert_clean_error(&o, "unknown strategy `billboards`");
     assert_clean_error(&o, "lemi, cubemap, equidistant, warp, dynamic");
     let o = lemi(&["compare", "builtin:city:20k:3", "--strategies", "warp,warp"]);
@@ -110,7 +115,10 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let rows = v["strategies"].as_array().unwrap();
-    let names: Vec<&str> = rows.iter().map(|r| r["strategy"].as_str().unwrap()).collect();
+    let names: Vec<&str> = rows
+        .iter()
+        .map(|r| r["strategy"].as_str().unwrap())
+        .collect();
     assert_eq!(names, ["lemi", "cubemap", "equidistant", "warp", "dynamic"]);
     for r in rows {
         let name = r["strategy"].as_str().unwrap();
@@ -134,7 +142,10 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
     assert!(lemi_max < 3.0, "lemi max error {lemi_max}");
     let md = std::fs::read_to_string(out.join("COMPARISON.md")).unwrap();
     for name in ["lemi", "cubemap", "equidistant", "warp", "dynamic"] {
-        assert!(md.contains(&format!("| {name} |")), "{name} row missing:\n{md}");
+        assert!(
+            md.contains(&format!("| {name} |")),
+            "{name} row missing:\n{md}"
+        );
     }
     assert!(md.contains("lemi compare"), "the command is recorded");
     assert!(out.join("comparison.json").is_file());

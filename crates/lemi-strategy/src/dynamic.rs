@@ -995,6 +995,7 @@ impl Strategy for DynamicStrategy {
                 fallback: true,
                 cache_bytes,
                 regenerations: 0,
+                gpu_ms: None,
                 warnings,
                 error_px: r.measure_error.then(|| vec![f32::NAN; n]),
             });
@@ -1060,6 +1061,7 @@ impl Strategy for DynamicStrategy {
             fallback: false,
             cache_bytes,
             regenerations: reasons.total(),
+            gpu_ms: None,
             warnings,
             error_px,
         })

@@ -101,7 +101,7 @@ impl Strategy for LayeredStrategy {
         let cell = state.current_cell.clone();
         let stalled = state.stalled;
         let cache_bytes = state.cache_bytes;
-        let (frame, near, quads, fallback) = match state.ready {
+        let (frame, near, quads, fallback, gpu_ms) = match state.ready {
             Some(c) => {
                 if cell != self.last_cell {
                     self.texture_bytes += c.texture_bytes();
@@ -112,6 +112,7 @@ impl Strategy for LayeredStrategy {
                     c.near_triangles(),
                     c.quad_count() as u64,
                     false,
+                    self.impostors.last_gpu_ms(),
                 )
             }
             None => (
@@ -119,6 +120,7 @@ impl Strategy for LayeredStrategy {
                 self.total_triangles,
                 0,
                 true,
+                self.renderer.last_gpu_ms(),
             ),
         };
         self.last_cell = cell.clone();
@@ -132,6 +134,7 @@ impl Strategy for LayeredStrategy {
             cache_bytes,
             regenerations: 0,
             warnings,
+            gpu_ms,
             error_px: None,
         })
     }

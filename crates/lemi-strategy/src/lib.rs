@@ -149,6 +149,10 @@ pub struct StrategyFrame {
     pub regenerations: u64,
     /// Warnings raised during the frame.
     pub warnings: Vec<String>,
+    /// GPU time of the frame's render passes (timestamp queries), when the whole frame is GPU
+    /// work and the adapter has timestamps; `None` otherwise (warp and dynamic do CPU work per
+    /// frame, so only their wall-clock time is meaningful).
+    pub gpu_ms: Option<f64>,
     /// With [`FrameRequest::measure_error`]: per pixel (row-major), the angle in output pixels
     /// between where the pixel's surface point truly is and where the frame shows it; `NaN` where
     /// it does not apply (background, near geometry). `None` if the strategy cannot measure it.

@@ -973,6 +973,7 @@ impl WarpStrategy {
             fallback: true,
             cache_bytes: self.cache_bytes(),
             regenerations: 0,
+            gpu_ms: None,
             warnings,
             error_px: r.measure_error.then(|| vec![f32::NAN; n]),
         })
@@ -1045,6 +1046,7 @@ impl Strategy for WarpStrategy {
             fallback: false,
             cache_bytes: self.cache_bytes(),
             regenerations: recorded_now as u64,
+            gpu_ms: None,
             warnings,
             error_px,
         })

@@ -216,6 +216,14 @@ pub struct Summary {
     pub geometry_p99_ms: Option<f64>,
     /// `geometry_median_ms / impostor_median_ms`.
     pub speedup_median: Option<f64>,
+    /// Median GPU time (timestamp queries, no readback) of each mode and their ratio, when the
+    /// adapter has timestamps and the strategy's frames are GPU work.
+    #[serde(default)]
+    pub impostor_gpu_median_ms: Option<f64>,
+    #[serde(default)]
+    pub geometry_gpu_median_ms: Option<f64>,
+    #[serde(default)]
+    pub speedup_gpu_median: Option<f64>,
     pub impostor_mean_fps: Option<f64>,
     pub geometry_mean_fps: Option<f64>,
     /// Everything about each mode.
@@ -243,6 +251,12 @@ impl Summary {
             geometry_median_ms: g.median_ms,
             geometry_p99_ms: g.p99_ms,
             speedup_median: speedup,
+            impostor_gpu_median_ms: i.gpu_median_ms,
+            geometry_gpu_median_ms: g.gpu_median_ms,
+            speedup_gpu_median: match (g.gpu_median_ms, i.gpu_median_ms) {
+                (Some(gm), Some(im)) if im > 0.0 => Some(gm / im),
+                _ => None,
+            },
             impostor_mean_fps: i.mean_fps,
             geometry_mean_fps: g.mean_fps,
             impostor: i,
