@@ -82,6 +82,12 @@ pub struct Args {
     /// Frames per second of the generated path.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
+    /// Walking speed of the generated path (m/s).
+    #[arg(long, default_value_t = 1.4)]
+    pub walk_speed: f64,
+    /// Flying speed of the generated path (m/s).
+    #[arg(long, default_value_t = 10.0)]
+    pub fly_speed: f64,
     /// Random interior viewpoints per cell in the evaluation.
     #[arg(long, default_value_t = 0)]
     pub viewpoints: usize,
@@ -272,7 +278,15 @@ pub fn run(args: Args) -> Result<()> {
         if path_written {
             a.extend([s("--path"), path_file.display().to_string()]);
         } else {
-            a.extend([s("--auto"), s("--fps"), s(args.fps)]);
+            a.extend([
+                s("--auto"),
+                s("--fps"),
+                s(args.fps),
+                s("--walk-speed"),
+                s(args.walk_speed),
+                s("--fly-speed"),
+                s(args.fly_speed),
+            ]);
         }
         if geometry.is_some() {
             a.push(s("--no-geometry"));
