@@ -4,8 +4,10 @@
 //! # Recording ("pre-recording images", report sec. 2 and 5)
 //! A cell's far field is recorded on the first frame that needs it (or by [`Strategy::preload`]):
 //! at the cell's **sample point**, its centre (the reference viewpoint of the bundle), one image per
-//! baked face (`manifest.params.faces`) at the bundle's resolution (`manifest.params.resolution`),
-//! each holding colour (sRGB RGBA8), linear view depth and the camera matrix
+//! baked face (`manifest.params.faces`) at [`WarpStrategy::recording_resolution`] (by default
+//! matched to the output view the bake assumed, so that a recorded pixel is no wider than an
+//! output pixel at the view centre, as the report recorded images of the window's size), each
+//! holding colour (sRGB RGBA8), linear view depth and the camera matrix
 //! `CAM1 = PJ · MV` ([`FaceRecording::view`]). Only the **far field** is recorded: the scene
 //! without the cell's near-list triangles, uploaded as a transient sub-scene and dropped after the
 //! recording.
@@ -15,9 +17,10 @@
 //! the fraction of the face width added: a face spans `[−1, 1]` in tan space (width 2), the
 //! recorded image spans `[−(1+b), 1+b]` (width `2 + 2b`, i.e. `b` of the face width more in total,
 //! `b/2` of it on each side); the report's best value, "1/5 of the width of the original face", is
-//! `b = 0.2`: half-extent 1.2 in tan space, a symmetric frustum of `2·atan(1.2) ≈ 100.4°`. The
-//! image keeps the bundle's `Res × Res` texels, so its texels are `1 + b` times larger in tan
-//! space than the baked faces' (the report: a larger border means more holes).
+//! `b = 0.2`: half-extent 1.2 in tan space, a symmetric frustum of `2·atan(1.2) ≈ 100.4°`. With
+//! a fixed number of pixels per face (`WarpOptions::resolution`), a larger border makes every
+//! pixel larger (the report: a larger border means more holes); the matched default grows the
+//! image with the border instead.
 //!
 //! # One frame (report sec. 3 and 4)
 //! 1. The cell's near geometry (its near list, the same as every strategy's) is drawn with the
@@ -147,6 +150,12 @@ pub struct WarpOptions {
     pub max_outline_span: Option<u32>,
     /// Cells whose recordings are kept (LRU), at least 1.
     pub cache_cells: usize,
+    /// Pixels per recorded face side. `None` (default): matched to the output view the bake
+    /// assumed (`output_width`, `output_fov_deg`), so that a recorded pixel is no wider than an
+    /// output pixel at the view centre, as the report recorded images of the window's size
+    /// (forward mapping from a smaller image leaves holes the hole filling cannot close); the
+    /// bundle's resolution when the bake recorded no output view. At most 4096.
+    pub resolution: Option<u32>,
 }
 
 impl Default for WarpOptions {
@@ -156,6 +165,7 @@ impl Default for WarpOptions {
             hole_filling: HoleFilling::default(),
             max_outline_span: None,
             cache_cells: 4,
+            resolution: None,
         }
     }
 }
@@ -175,6 +185,13 @@ impl WarpOptions {
                 "warp option `cache_cells` must be 1..=4096 (cells whose recordings are kept), got {}",
                 self.cache_cells
             )));
+        }
+        if let Some(r) = self.resolution {
+            if !(8..=4096).contains(&r) {
+                return Err(StrategyError::Invalid(format!(
+                    "warp option `resolution` must be 8..=4096 pixels per recorded face side, got {r}"
+                )));
+            }
         }
         if self.max_outline_span == Some(0) {
             return Err(StrategyError::Invalid(
@@ -797,6 +814,24 @@ impl WarpStrategy {
         })
     }
 
+    /// Pixels per recorded face side (see [`WarpOptions::resolution`]).
+    pub fn recording_resolution(&self) -> u32 {
+        let p = &self.manifest.params;
+        let matched = match (p.output_width, p.output_fov_deg) {
+            (Some(w), Some(fov)) if w > 0 && fov > 0.0 && fov < 180.0 => {
+                let per_tan = 0.5 * w as f64 / (0.5 * fov.to_radians()).tan();
+                Some((2.0 * self.options.half_extent() * per_tan).ceil() as u32)
+            }
+            _ => None,
+        };
+        let max = self.gpu.limits().max_texture_dimension_2d.min(4096);
+        self.options
+            .resolution
+            .or(matched)
+            .unwrap_or(p.resolution)
+            .clamp(8, max.max(8))
+    }
+
     pub fn options(&self) -> &WarpOptions {
         &self.options
     }
@@ -905,7 +940,7 @@ impl WarpStrategy {
             let geometry = GpuGeometry::upload(&self.gpu, &far_meshes, &UploadOptions::default())?;
             drop(far_meshes);
             let far = GpuScene::from_parts(self.materials.clone(), geometry)?;
-            let res = self.manifest.params.resolution;
+            let res = self.recording_resolution();
             let half_extent = self.options.half_extent();
             let record_options = RenderOptions {
                 clear: [0; 4],
