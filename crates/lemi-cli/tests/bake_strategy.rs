@@ -2,36 +2,11 @@
 //! manifest records the layering, the summary names the strategy), and strategies that are not
 //! baked, unknown names and bad `--overlap` values are clear errors with a non-zero exit code.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
-fn lemi(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lemi"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("the lemi binary runs")
-}
+use std::process::Output;
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lemi-cli-strategy-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn assert_clean_error(o: &Output, needles: &[&str]) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {e}");
-    assert_ne!(o.status.code(), Some(0));
-    assert!(!e.contains("panicked"), "panic: {e}");
-    for needle in needles {
-        assert!(e.contains(needle), "error should mention `{needle}`: {e}");
-    }
-}
+use common::{assert_clean_error_all, lemi, stderr, tmp};
 
 /// One small cell of the builtin city: 64² texels, 4 layers.
 const SMALL: [&str; 13] = [
@@ -66,7 +41,7 @@ fn manifest_params(bundle: &std::path::Path) -> serde_json::Value {
 
 #[test]
 fn equidistant_and_cubemap_bake_and_say_so() {
-    let d = tmp("ok");
+    let d = tmp("cli-strategy", "ok");
     let equi = d.join("equi");
     let o = bake(
         equi.to_str().unwrap(),
@@ -113,7 +88,7 @@ fn equidistant_and_cubemap_bake_and_say_so() {
 
 #[test]
 fn strategies_that_are_not_baked_and_bad_overlaps_are_clear_errors() {
-    let d = tmp("bad");
+    let d = tmp("cli-strategy", "bad");
     let out = d.join("b");
     let o = out.to_str().unwrap();
     for (extra, needles) in [
@@ -151,7 +126,7 @@ fn strategies_that_are_not_baked_and_bad_overlaps_are_clear_errors() {
         ),
     ] {
         let out = bake(o, &extra);
-        assert_clean_error(&out, &needles);
+        assert_clean_error_all(&out, &needles);
     }
     assert!(
         !out.join("manifest.json").exists(),

@@ -1,33 +1,9 @@
 //! End-to-end tests of the `lemi` binary: real scenes in, real files out, and clear errors (never a
 //! panic) for bad input.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
-fn lemi(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lemi"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("the lemi binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lemi-cli-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn assert_clean_error(o: &Output, needle: &str) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {e}");
-    assert!(!e.contains("panicked"), "panic: {e}");
-    assert!(e.contains(needle), "error should mention `{needle}`: {e}");
-}
+use common::{assert_clean_error, lemi, stderr, tmp};
 
 #[test]
 fn info_json_has_counts_and_bounds() {
@@ -51,7 +27,7 @@ fn info_rejects_bad_inputs_by_name() {
     );
     assert_clean_error(&lemi(&["info", "builtin:castle"]), "castle");
     assert_clean_error(&lemi(&["info", "builtin:city:0"]), "city:0");
-    let d = tmp("garbage");
+    let d = tmp("cli", "garbage");
     let p = d.join("bad.ply");
     std::fs::write(
         &p,
@@ -65,7 +41,7 @@ fn info_rejects_bad_inputs_by_name() {
 
 #[test]
 fn render_writes_an_image_of_the_requested_size() {
-    let d = tmp("render");
+    let d = tmp("cli", "render");
     let out = d.join("city.png");
     let o = lemi(&[
         "render",
@@ -94,7 +70,7 @@ fn render_writes_an_image_of_the_requested_size() {
 
 #[test]
 fn render_rejects_absurd_flags() {
-    let d = tmp("render-bad");
+    let d = tmp("cli", "render-bad");
     let out = d.join("x.png");
     let o = out.to_str().unwrap();
     assert_clean_error(
@@ -153,7 +129,7 @@ fn layers_reproduces_the_paper_and_rejects_bad_parameters() {
 /// `lemi bake` → `lemi render BUNDLE --compare`, resume, shards + merge, all through the binary.
 #[test]
 fn bake_render_compare_resume_and_merge() {
-    let d = tmp("bake");
+    let d = tmp("cli", "bake");
     let bundle = d.join("bundle");
     let b = bundle.to_str().unwrap();
     let common = [
@@ -282,7 +258,7 @@ fn bake_render_compare_resume_and_merge() {
 
 #[test]
 fn bake_rejects_absurd_flags_by_name() {
-    let d = tmp("bake-bad");
+    let d = tmp("cli", "bake-bad");
     let out = d.join("b");
     let o = out.to_str().unwrap();
     let base = ["bake", "builtin:city:20k:3", "-o", o];
@@ -308,7 +284,7 @@ fn bake_rejects_absurd_flags_by_name() {
 /// writes the records, the summary and the plot; bad paths are clear errors.
 #[test]
 fn walk_auto_writes_records_summary_and_plot() {
-    let d = tmp("walk");
+    let d = tmp("cli", "walk");
     let bundle = d.join("bundle");
     let b = bundle.to_str().unwrap();
     let o = lemi(&[
@@ -403,7 +379,7 @@ fn walk_auto_writes_records_summary_and_plot() {
 /// `lemi eval`: a quick certificate through the binary, its gates, and clear errors for bad input.
 #[test]
 fn eval_certificate_gates_and_bad_input() {
-    let d = tmp("eval");
+    let d = tmp("cli", "eval");
     let bundle = d.join("bundle");
     let b = bundle.to_str().unwrap();
     let o = lemi(&[

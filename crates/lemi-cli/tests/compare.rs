@@ -2,33 +2,9 @@
 //! walked along one path and evaluated at the same viewpoints; the tables name every strategy and
 //! every strategy's image is recognisable. Unknown strategy names are clear errors everywhere.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod common;
 
-fn lemi(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lemi"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("the lemi binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lemi-compare-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn assert_clean_error(o: &Output, needle: &str) {
-    let e = stderr(o);
-    assert!(!o.status.success(), "expected failure, stderr: {e}");
-    assert!(!e.contains("panicked"), "panic: {e}");
-    assert!(e.contains(needle), "error should mention `{needle}`: {e}");
-}
+use common::{assert_clean_error, lemi, stderr, tmp};
 
 #[test]
 fn unknown_strategy_names_are_rejected_clearly() {
@@ -43,7 +19,7 @@ fn unknown_strategy_names_are_rejected_clearly() {
     let o = lemi(&["compare", "builtin:city:20k:3", "--strategies", "warp,warp"]);
     assert_clean_error(&o, "twice");
     // walk and eval check the name before touching the GPU
-    let d = tmp("names");
+    let d = tmp("compare", "names");
     let bundle = d.join("bundle");
     let b = bundle.to_str().unwrap();
     let o = lemi(&[
@@ -82,7 +58,7 @@ fn unknown_strategy_names_are_rejected_clearly() {
 
 #[test]
 fn compare_runs_every_strategy_and_writes_the_tables() {
-    let d = tmp("all");
+    let d = tmp("compare", "all");
     let out = d.join("cmp");
     let o = lemi(&[
         "compare",

@@ -23,9 +23,12 @@
 //! Without an adapter the GPU tests fail with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+mod common;
+
+use common::{add_box, serial, EYE};
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
 use lemi_core::bundle::{BakeParams, Manifest, SceneRef};
@@ -42,12 +45,6 @@ use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, Stra
 // ---------------------------------------------------------------------------------------------
 // fixtures
 
-/// GPU tests share two cores: one at a time.
-fn serial() -> MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|p| p.into_inner())
-}
-
 fn params() -> BakeParams {
     serde_json::from_value(serde_json::json!({
         "cell_size": 10.0,
@@ -61,46 +58,6 @@ fn params() -> BakeParams {
         "micro_threshold": 0.6,
     }))
     .expect("bake parameters")
-}
-
-fn add_box(b: &mut SceneBuilder, material: u32, min: [f32; 3], max: [f32; 3], color: [u8; 4]) {
-    let [x0, y0, z0] = min;
-    let [x1, y1, z1] = max;
-    let faces: [([f32; 3], [[f32; 3]; 4]); 5] = [
-        (
-            [1.0, 0.0, 0.0],
-            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
-        ),
-        (
-            [-1.0, 0.0, 0.0],
-            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
-        ),
-        (
-            [0.0, 1.0, 0.0],
-            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
-        ),
-        (
-            [0.0, 0.0, 1.0],
-            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
-        ),
-        (
-            [0.0, 0.0, -1.0],
-            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
-        ),
-    ];
-    let mut mesh = Mesh {
-        material,
-        ..Default::default()
-    };
-    for (n, corners) in faces {
-        let base = mesh.vertices.len() as u32;
-        for c in corners {
-            mesh.vertices.push(Vertex::new(c, n, [0.0, 0.0], color));
-        }
-        mesh.indices
-            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    b.add_mesh(mesh);
 }
 
 /// A flat ground of 10 m tiles over ±120 m (one colour, so that only silhouettes differ) and
@@ -170,12 +127,6 @@ fn scene() -> Scene {
     b.finish()
 }
 
-fn grid() -> CellGrid {
-    let region = Aabb::new(DVec3::new(-10.0, 1.7, -5.0), DVec3::new(10.0, 1.7, 5.0));
-    CellGrid::tile(region, 10.0).expect("grid")
-}
-
-const EYE: f64 = 1.7;
 const WIDTH: u32 = 128;
 const HEIGHT: u32 = 96;
 const FOV: f64 = 60.0;
@@ -198,23 +149,8 @@ fn fixture() -> Option<&'static Fixture> {
             let scene = scene();
             let dir = tempfile::tempdir().expect("temp dir");
             let bundle = dir.path().join("bundle");
-            let grid = grid();
-            let job = BakeJob {
-                bundle: bundle.clone(),
-                scene: SceneRef {
-                    sources: vec!["test:dynamic".into()],
-                    up: "y".into(),
-                    fingerprint: "fingerprint-of-the-dynamic-scene".into(),
-                    triangles: scene.triangle_count(),
-                },
-                params: params(),
-                cells: grid.cells(),
-                grid,
-                shard: None,
-            };
             let t = Instant::now();
-            let baker = Baker::new(&gpu, &scene, params()).expect("baker");
-            run(&job, |cell| baker.bake(cell, |_| {}), |_, _, _| {}).expect("bake");
+            common::bake(&gpu, &scene, &params(), &bundle, "dynamic");
             eprintln!(
                 "baked 2 cells of {} triangles in {:.1} s",
                 scene.triangle_count(),

@@ -16,15 +16,17 @@
 //! Without an adapter the tests fail with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+mod common;
+
+use common::{add_box, grid, serial, EYE};
 use glam::DVec3;
-use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, Manifest, SceneRef};
+use lemi_core::bundle::{BakeParams, Manifest};
 use lemi_core::camera::{Camera, View};
-use lemi_core::cell::{CellGrid, ViewCell};
-use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
+use lemi_core::cell::ViewCell;
+use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::warp::{HoleFilling, WarpOptions, WarpStrategy};
 use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, StrategyKind};
@@ -32,17 +34,10 @@ use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, Stra
 // ---------------------------------------------------------------------------------------------
 // fixtures
 
-/// GPU tests share two cores: one at a time.
-fn serial() -> MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|p| p.into_inner())
-}
-
 const RES: u32 = 96;
 /// Output images: 64², 90° (a source texel of the bordered 96² face is 0.8 output pixel wide).
 const OUT: u32 = 64;
 const FOV: f64 = 90.0;
-const EYE: f64 = 1.7;
 
 fn params() -> BakeParams {
     serde_json::from_value(serde_json::json!({
@@ -57,46 +52,6 @@ fn params() -> BakeParams {
         "micro_threshold": 0.6,
     }))
     .expect("bake parameters")
-}
-
-fn add_box(b: &mut SceneBuilder, material: u32, min: [f32; 3], max: [f32; 3], color: [u8; 4]) {
-    let [x0, y0, z0] = min;
-    let [x1, y1, z1] = max;
-    let faces: [([f32; 3], [[f32; 3]; 4]); 5] = [
-        (
-            [1.0, 0.0, 0.0],
-            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
-        ),
-        (
-            [-1.0, 0.0, 0.0],
-            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
-        ),
-        (
-            [0.0, 1.0, 0.0],
-            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
-        ),
-        (
-            [0.0, 0.0, 1.0],
-            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
-        ),
-        (
-            [0.0, 0.0, -1.0],
-            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
-        ),
-    ];
-    let mut mesh = Mesh {
-        material,
-        ..Default::default()
-    };
-    for (n, corners) in faces {
-        let base = mesh.vertices.len() as u32;
-        for c in corners {
-            mesh.vertices.push(Vertex::new(c, n, [0.0, 0.0], color));
-        }
-        mesh.indices
-            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    b.add_mesh(mesh);
 }
 
 /// A ground of 40 m tiles over ±320 m, a few boxes close to the cells (near field) and rings of
@@ -181,11 +136,6 @@ fn scene() -> Scene {
 }
 
 /// Two 10 m cells along +X at eye height: `0_0_0` spans x ∈ [−10, 0], `1_0_0` [0, 10].
-fn grid() -> CellGrid {
-    let region = Aabb::new(DVec3::new(-10.0, EYE, -5.0), DVec3::new(10.0, EYE, 5.0));
-    CellGrid::tile(region, 10.0).expect("grid")
-}
-
 struct Fixture {
     scene: Arc<Scene>,
     bundle: PathBuf,
@@ -200,23 +150,8 @@ fn fixture() -> Option<&'static Fixture> {
             let scene = scene();
             let dir = tempfile::tempdir().expect("temp dir");
             let bundle = dir.path().join("bundle");
-            let grid = grid();
-            let job = BakeJob {
-                bundle: bundle.clone(),
-                scene: SceneRef {
-                    sources: vec!["test:warp".into()],
-                    up: "y".into(),
-                    fingerprint: "fingerprint-of-the-warp-scene".into(),
-                    triangles: scene.triangle_count(),
-                },
-                params: params(),
-                cells: grid.cells(),
-                grid,
-                shard: None,
-            };
             let t = Instant::now();
-            let baker = Baker::new(&gpu, &scene, params()).expect("baker");
-            run(&job, |cell| baker.bake(cell, |_| {}), |_, _, _| {}).expect("bake");
+            common::bake(&gpu, &scene, &params(), &bundle, "warp");
             eprintln!("baked 2 cells in {:.1} s", t.elapsed().as_secs_f64());
             for id in ["0_0_0", "1_0_0"] {
                 let file = lemi_core::bundle::CellFile::read(
