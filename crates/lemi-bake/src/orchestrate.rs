@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use lemi_core::bundle::{
-    cell_file_name, BakeParams, BundleError, CellEntry, CellFile, Manifest, SceneRef,
-    BUNDLE_VERSION, MANIFEST_FORMAT,
+    cell_file_name, read_cell_file, BakeParams, BundleError, CellCheck, CellEntry, CellFile,
+    CellStats, Manifest, SceneRef, BUNDLE_VERSION, MANIFEST_FORMAT,
 };
-use lemi_core::cell::{CellGrid, Shard, ViewCell};
+use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
 use lemi_core::container::write_atomic;
 use serde::{Deserialize, Serialize};
 
@@ -27,7 +27,7 @@ pub enum BakeError {
     #[error("{0}")]
     Invalid(String),
     #[error("cell {cell}: {message}")]
-    Cell { cell: String, message: String },
+    Cell { cell: CellId, message: String },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BakeError + '_ {
@@ -60,7 +60,7 @@ pub struct ShardRecord {
     pub params_hash: String,
     pub grid: CellGrid,
     /// Every cell of the bundle (so merge knows the full list).
-    pub all_cells: Vec<String>,
+    pub all_cells: Vec<CellId>,
     pub cells: Vec<CellEntry>,
 }
 
@@ -72,8 +72,10 @@ pub enum CellOutcome {
         file: Box<CellFile>,
         seconds: f64,
     },
+    /// Intact from an earlier identical run; `stats` are its file's.
     Skipped {
         entry: CellEntry,
+        stats: Box<CellStats>,
     },
 }
 
@@ -86,9 +88,9 @@ pub struct RunSummary {
     pub record: PathBuf,
 }
 
-fn entry_for(id: &str, bytes: &[u8]) -> CellEntry {
+fn entry_for(id: CellId, bytes: &[u8]) -> CellEntry {
     CellEntry {
-        id: id.to_string(),
+        id,
         file: cell_file_name(id),
         bytes: bytes.len() as u64,
         blake3: blake3::hash(bytes).to_hex().to_string(),
@@ -98,15 +100,21 @@ fn entry_for(id: &str, bytes: &[u8]) -> CellEntry {
 /// Checks a cell file already on disk: returns its entry if it is intact and was baked from the same
 /// scene with the same parameters for the same cell (index, centre and extent: a region moved by a
 /// fraction of a cell keeps the ids but not the reference viewpoints), so a resumed bake skips it.
-fn existing(bundle: &Path, cell: &ViewCell, job: &BakeJob, hash: &str) -> Option<CellEntry> {
+fn existing(bundle: &Path, cell: &ViewCell, job: &BakeJob, hash: &str) -> Option<CellOutcome> {
     let id = cell.id();
-    let path = bundle.join(cell_file_name(&id));
-    let bytes = std::fs::read(&path).ok()?;
-    let file = CellFile::decode(&bytes).ok()?;
-    let same = file.header.params_hash == hash
-        && file.header.scene_fingerprint == job.scene.fingerprint
-        && file.header.cell == *cell;
-    same.then(|| entry_for(&id, &bytes))
+    let check = CellCheck {
+        id,
+        entry: None,
+        params_hash: hash,
+        scene_fingerprint: &job.scene.fingerprint,
+        cell: Some(cell),
+    };
+    read_cell_file(&bundle.join(cell_file_name(id)), &check)
+        .ok()
+        .map(|v| CellOutcome::Skipped {
+            entry: v.entry,
+            stats: Box::new(v.file.header.stats),
+        })
 }
 
 /// Bakes the job's cells with `bake_cell`, skipping intact cells of an earlier identical run,
@@ -127,8 +135,8 @@ pub fn run(
     };
     let mut outcomes = Vec::with_capacity(mine.len());
     for (i, cell) in mine.iter().enumerate() {
-        let outcome = if let Some(entry) = existing(&job.bundle, cell, job, &hash) {
-            CellOutcome::Skipped { entry }
+        let outcome = if let Some(skipped) = existing(&job.bundle, cell, job, &hash) {
+            skipped
         } else {
             let t = Instant::now();
             let mut file = bake_cell(cell)?;
@@ -138,10 +146,10 @@ pub fn run(
                 cell: cell.id(),
                 message: e.to_string(),
             })?;
-            let path = job.bundle.join(cell_file_name(&cell.id()));
+            let path = job.bundle.join(cell_file_name(cell.id()));
             write_atomic(&path, &bytes).map_err(io(&path))?;
             CellOutcome::Baked {
-                entry: entry_for(&cell.id(), &bytes),
+                entry: entry_for(cell.id(), &bytes),
                 file: Box::new(file),
                 seconds: t.elapsed().as_secs_f64(),
             }
@@ -152,7 +160,7 @@ pub fn run(
     let entries: Vec<CellEntry> = outcomes
         .iter()
         .map(|o| match o {
-            CellOutcome::Baked { entry, .. } | CellOutcome::Skipped { entry } => entry.clone(),
+            CellOutcome::Baked { entry, .. } | CellOutcome::Skipped { entry, .. } => entry.clone(),
         })
         .collect();
     let record = match job.shard {
@@ -256,7 +264,7 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
     let mut by_id = std::collections::HashMap::new();
     for (_, r) in &records {
         for c in &r.cells {
-            by_id.insert(c.id.clone(), c.clone());
+            by_id.insert(c.id, c.clone());
         }
     }
     let mut cells = Vec::with_capacity(first.all_cells.len());
@@ -264,14 +272,14 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
         let entry = by_id
             .get(id)
             .ok_or_else(|| BakeError::Invalid(format!("cell {id} is in no shard record")))?;
-        let path = bundle.join(&entry.file);
-        let bytes = std::fs::read(&path).map_err(io(&path))?;
-        if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
-            return Err(BakeError::Invalid(format!(
-                "{}: does not match its shard record (changed after baking)",
-                path.display()
-            )));
-        }
+        let check = CellCheck {
+            id: *id,
+            entry: Some(entry),
+            params_hash: &first.params_hash,
+            scene_fingerprint: &first.scene.fingerprint,
+            cell: None,
+        };
+        read_cell_file(&bundle.join(&entry.file), &check)?;
         cells.push(entry.clone());
     }
     let manifest = Manifest {

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 use glam::{DVec3, IVec3};
 use lemi_bake::{merge, run, BakeJob, Baker, CellOutcome, RunSummary};
 use lemi_core::bundle::{
-    cell_file_name, manifest_path, BakeParams, CellFile, CellHeader, CellStats, LayerInfo,
-    LayerTarget, Manifest, SceneRef, BUNDLE_VERSION,
+    cell_file_name, manifest_path, read_cell_file, BakeParams, Bundle, BundleError, CellCheck,
+    CellFile, CellHeader, CellStats, LayerInfo, LayerTarget, Manifest, SceneRef, BUNDLE_VERSION,
 };
 use lemi_core::cell::{CellGrid, Shard, ViewCell};
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
@@ -257,14 +257,32 @@ fn outcomes(s: &RunSummary) -> Vec<(String, bool)> {
     s.outcomes
         .iter()
         .map(|o| match o {
-            CellOutcome::Baked { entry, .. } => (entry.id.clone(), true),
-            CellOutcome::Skipped { entry } => (entry.id.clone(), false),
+            CellOutcome::Baked { entry, .. } => (entry.id.to_string(), true),
+            CellOutcome::Skipped { entry, .. } => (entry.id.to_string(), false),
         })
         .collect()
 }
 
 fn cell_path(bundle: &Path, id: &str) -> PathBuf {
-    bundle.join(cell_file_name(id))
+    bundle.join(cell_file_name(id.parse().expect("a cell id")))
+}
+
+/// Reads a baked cell of `bundle` through the bundle's reader (every check).
+fn read_cell(bundle: &Path, id: &str) -> Result<CellFile, BundleError> {
+    Bundle::open(bundle)?.cell(id.parse().expect("a cell id"))
+}
+
+/// Reads a synthetic cell file (empty parameters hash and fingerprint) with the reader's checks
+/// of the file itself.
+fn read_synthetic(path: &Path, cell: &ViewCell) -> Result<CellFile, BundleError> {
+    let check = CellCheck {
+        id: cell.id(),
+        entry: None,
+        params_hash: "",
+        scene_fingerprint: "",
+        cell: Some(cell),
+    };
+    read_cell_file(path, &check).map(|v| v.file)
 }
 
 fn read(path: &Path) -> Vec<u8> {
@@ -433,7 +451,7 @@ fn resume_skips_identical_cells_and_rebakes_changed_ones() {
     let job1 = job(&bundle, &scene, params(), None);
     let baker = Baker::new(&gpu, &scene, params()).unwrap();
     let calls = Cell::new(0);
-    let ids: Vec<String> = job1.cells.iter().map(|c| c.id()).collect();
+    let ids: Vec<String> = job1.cells.iter().map(|c| c.id().to_string()).collect();
     assert_eq!(ids, ["0_0_0", "1_0_0", "2_0_0"]);
 
     // first run: everything baked
@@ -476,7 +494,7 @@ fn resume_skips_identical_cells_and_rebakes_changed_ones() {
             ("2_0_0".to_string(), false)
         ]
     );
-    CellFile::read(&damaged).expect("the re-baked cell is intact");
+    read_cell(&bundle, "1_0_0").expect("the re-baked cell is intact");
     assert!(
         read(&damaged) == files1[1],
         "re-baking a cell gives other bytes"
@@ -519,7 +537,7 @@ fn resume_skips_identical_cells_and_rebakes_changed_ones() {
     assert_eq!(m.params_hash, p2.hash());
     assert_ne!(m.params_hash, params().hash());
     for id in &ids {
-        let f = CellFile::read(&cell_path(&bundle, id)).unwrap();
+        let f = read_cell(&bundle, id).unwrap();
         assert_eq!(f.header.params_hash, p2.hash(), "cell {id}");
     }
 
@@ -554,7 +572,7 @@ fn shards_merge_to_the_single_run_bundle() {
     let single = bake(&job(&a, &scene, params(), None), &baker, &calls);
     assert_eq!(single.outcomes.len(), 3);
     let manifest_a = Manifest::read(&a).unwrap();
-    let ids: Vec<String> = manifest_a.cells.iter().map(|c| c.id.clone()).collect();
+    let ids: Vec<String> = manifest_a.cells.iter().map(|c| c.id.to_string()).collect();
     assert_eq!(ids.len(), 3);
 
     for n in [2u32, 3] {
@@ -642,7 +660,7 @@ fn corrupt_or_truncated_files_give_clear_errors() {
     let p = path.display().to_string();
     let check = |bytes: &[u8], needles: &[&str], what: &str| {
         std::fs::write(&path, bytes).unwrap();
-        let e = err_text(CellFile::read(&path), what);
+        let e = err_text(read_synthetic(&path, &cell), what);
         assert_mentions(&e, &[&p], what);
         assert_mentions(&e, needles, what);
     };
@@ -691,7 +709,7 @@ fn corrupt_or_truncated_files_give_clear_errors() {
         "an unsupported version",
     );
     std::fs::remove_file(&path).unwrap();
-    let e = err_text(CellFile::read(&path), "a missing cell file");
+    let e = err_text(read_synthetic(&path, &cell), "a missing cell file");
     assert_mentions(&e, &[&p], "a missing cell file");
 
     // manifests
@@ -1016,7 +1034,7 @@ fn baked_cell_is_consistent() {
     let path = bundle.join(&entry.file);
     let bytes = read(&path);
     assert_eq!(entry.bytes, bytes.len() as u64);
-    let back = CellFile::read(&path).unwrap();
+    let back = read_cell(&bundle, &entry.id.to_string()).unwrap();
     assert!(
         back == stored,
         "the cell file read back differs from the baked one: {}",
@@ -1141,11 +1159,11 @@ fn resume_rebakes_cells_that_moved() {
         .cells
         .iter()
         .filter(|c| {
-            CellFile::read(&cell_path(&bundle, &c.id()))
+            read_cell(&bundle, &c.id().to_string())
                 .map(|f| f.header.cell != **c)
                 .unwrap_or(true)
         })
-        .map(|c| c.id())
+        .map(|c| c.id().to_string())
         .collect();
     assert!(
         stale.is_empty() && calls.get() == 6,

@@ -15,7 +15,7 @@ use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_bake::{BakeJob, Baker, CellOutcome};
 use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, Layering, SceneRef};
-use lemi_core::cell::{CellGrid, Shard, ViewCell};
+use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
 use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
 use lemi_core::{Aabb, Face};
 use lemi_gpu::{BackendChoice, Gpu};
@@ -183,7 +183,7 @@ fn parse_shard(s: &str) -> Result<Shard, String> {
 /// Per-cell line of the summary.
 #[derive(serde::Serialize)]
 struct CellSummary {
-    id: String,
+    id: CellId,
     status: &'static str,
     seconds: f64,
     bytes: u64,
@@ -203,9 +203,9 @@ struct CellSummary {
 }
 
 impl CellSummary {
-    fn new(id: &str, status: &'static str, seconds: f64, bytes: u64, s: &CellStats) -> Self {
+    fn new(id: CellId, status: &'static str, seconds: f64, bytes: u64, s: &CellStats) -> Self {
         CellSummary {
-            id: id.to_string(),
+            id,
             status,
             seconds,
             bytes,
@@ -449,25 +449,22 @@ pub fn run(args: Args) -> Result<()> {
                 baked += 1;
                 add(&mut total, &file.header.stats);
                 per_cell.push(CellSummary::new(
-                    &entry.id,
+                    entry.id,
                     "baked",
                     *seconds,
                     entry.bytes,
                     &file.header.stats,
                 ));
             }
-            CellOutcome::Skipped { entry } => {
+            CellOutcome::Skipped { entry, stats } => {
                 skipped += 1;
-                let stats = lemi_core::bundle::CellFile::read(&out.join(&entry.file))
-                    .map(|f| f.header.stats)
-                    .unwrap_or_default();
-                add(&mut total, &stats);
+                add(&mut total, stats);
                 per_cell.push(CellSummary::new(
-                    &entry.id,
+                    entry.id,
                     "skipped (already baked)",
                     0.0,
                     entry.bytes,
-                    &stats,
+                    stats,
                 ));
             }
         }

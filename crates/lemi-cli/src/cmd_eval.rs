@@ -22,7 +22,7 @@ pub struct Args {
     pub bundle: PathBuf,
     /// Only these cells (grid coordinates `x_y_z`, comma-separated); default: every baked cell.
     #[arg(long, value_delimiter = ',')]
-    pub cells: Vec<String>,
+    pub cells: Vec<lemi_core::cell::CellId>,
     /// Random interior viewpoints per cell (besides centre, corners, face and edge midpoints).
     #[arg(long, default_value_t = 4)]
     pub viewpoints: usize,
@@ -87,11 +87,11 @@ pub fn run(args: Args) -> Result<()> {
         bail!("--viewpoints {} is absurd (at most 10000)", args.viewpoints);
     }
     let backend = BackendChoice::parse(&args.backend).context("--backend")?;
-    let (manifest, scene) =
-        crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let manifest = bundle.manifest().clone();
     for id in &args.cells {
-        if !manifest.cells.iter().any(|c| &c.id == id) {
-            let baked: Vec<&str> = manifest.cells.iter().map(|c| c.id.as_str()).collect();
+        if bundle.entry(*id).is_none() {
+            let baked: Vec<String> = bundle.cell_ids().iter().map(|c| c.to_string()).collect();
             bail!(
                 "--cells: cell {id} is not baked in {} (baked: {})",
                 args.bundle.display(),
@@ -131,7 +131,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let t = std::time::Instant::now();
     let run = if kind.is_layered() {
-        lemi_eval::evaluate_bundle(&gpu, &args.bundle, &manifest, &scene, &options, progress)?
+        lemi_eval::evaluate_bundle(&gpu, &bundle, &scene, &options, progress)?
     } else {
         let scene = Arc::new(scene);
         let materials = Arc::new(
@@ -140,8 +140,7 @@ pub fn run(args: Args) -> Result<()> {
         );
         let ctx = StrategyContext {
             gpu: gpu.clone(),
-            bundle: args.bundle.clone(),
-            manifest: manifest.clone(),
+            bundle: bundle.clone(),
             scene: scene.clone(),
             materials,
         };
@@ -153,15 +152,7 @@ pub fn run(args: Args) -> Result<()> {
                 ..Default::default()
             },
         );
-        lemi_eval::evaluate_with(
-            &gpu,
-            &args.bundle,
-            &manifest,
-            &scene,
-            &options,
-            &mut cells,
-            progress,
-        )?
+        lemi_eval::evaluate_with(&gpu, &bundle, &scene, &options, &mut cells, progress)?
     };
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();

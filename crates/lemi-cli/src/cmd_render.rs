@@ -262,16 +262,18 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
     if args.depth.is_some() && args.compare {
         bail!("--depth and --compare cannot be combined");
     }
-    let (manifest, scene) = crate::bundle_view::open(&bundle, &args.scene_override, args.json)?;
+    let (opened, scene) = crate::bundle_view::open(&bundle, &args.scene_override, args.json)?;
     let mut args = args;
     if args.eye.is_none() {
-        args.eye = crate::bundle_view::first_cell_center(&manifest);
+        args.eye = opened.first_cell().map(|c| c.center);
         if args.look.is_none() && args.dir.is_none() && args.yaw.is_none() {
             args.dir = Some(DVec3::X);
         }
     }
     let cam = camera(&args, &scene.bounds)?;
-    let (cell, file) = crate::bundle_view::cell_at(&bundle, &manifest, cam.eye)?;
+    let (cell, file) = opened
+        .cell_at(cam.eye)
+        .context("the eye must lie in a baked cell")?;
     let macros = file
         .decode_macros()
         .with_context(|| format!("{}: macro-textures", bundle.display()))?;

@@ -170,7 +170,8 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     check_display()?;
-    let (manifest, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, false)?;
+    let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, false)?;
+    let manifest = bundle.manifest().clone();
     let event_loop = EventLoop::new().map_err(|e| {
         anyhow::anyhow!(
             "cannot open the display (DISPLAY={}, WAYLAND_DISPLAY={}): {e}; is the X server or \
@@ -182,10 +183,8 @@ pub fn run(args: Args) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     let eye = match args.eye {
         Some(e) => e,
-        None => manifest
-            .cells
-            .iter()
-            .find_map(|c| manifest.grid.parse_id(&c.id).ok())
+        None => bundle
+            .first_cell()
             .map(|c| c.center)
             .context("the bundle has no baked cells; pass --eye to look at its scene anyway")?,
     };

@@ -115,12 +115,12 @@ pub fn run(args: Args) -> Result<()> {
             bail!("--fov must be in (0, 180) degrees (got {f})");
         }
     }
-    let (manifest, scene) =
-        crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let manifest = bundle.manifest().clone();
     let baked: Vec<_> = manifest
         .cells
         .iter()
-        .filter_map(|c| manifest.grid.parse_id(&c.id).ok())
+        .filter_map(|c| manifest.grid.cell_of(c.id).ok())
         .collect();
     let path = match &args.path {
         Some(p) => CameraPath::read(p)?,
@@ -165,8 +165,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let ctx = StrategyContext {
         gpu: gpu.clone(),
-        bundle: args.bundle.clone(),
-        manifest: manifest.clone(),
+        bundle: bundle.clone(),
         scene: scene.clone(),
         materials: materials.clone(),
     };
@@ -287,7 +286,7 @@ pub fn run(args: Args) -> Result<()> {
                 near_triangles: 0,
                 impostor_quads: 0,
                 total_triangles,
-                cell: manifest.grid.locate(pose.eye).map(|c| c.id()),
+                cell: manifest.grid.locate(pose.eye).map(|c| c.id().to_string()),
                 cell_switch: false,
                 stalled: false,
                 cache_bytes: 0,

@@ -2,10 +2,81 @@
 //! its reference viewpoint. A region is tiled into a grid of cells; a bake may take all of them, an
 //! explicit subset, or a deterministic shard for scale-out.
 
+use std::fmt;
+use std::str::FromStr;
+
 use glam::{DVec3, IVec3};
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::Aabb;
+
+/// The identity of a view cell: its grid coordinates, written `x_y_z` (e.g. `3_0_-1`) in file
+/// names, manifests, reports and `--cells`. Serialised as that string, so manifests and reports
+/// read the same as when ids were plain strings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct CellId([i32; 3]);
+
+impl CellId {
+    pub fn new(index: IVec3) -> CellId {
+        CellId(index.to_array())
+    }
+
+    /// The grid coordinates.
+    pub fn index(self) -> IVec3 {
+        IVec3::from_array(self.0)
+    }
+}
+
+impl fmt::Display for CellId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let [x, y, z] = self.0;
+        write!(f, "{x}_{y}_{z}")
+    }
+}
+
+impl FromStr for CellId {
+    type Err = CellError;
+
+    /// Parses `x_y_z` (surrounding white space allowed). Whether the cell lies in a grid is
+    /// [`CellGrid::cell_of`]'s question.
+    fn from_str(s: &str) -> Result<CellId, CellError> {
+        let bad = || CellError::BadCellId(s.to_string());
+        let mut parts = s.trim().split('_');
+        let mut v = [0i32; 3];
+        for c in &mut v {
+            *c = parts.next().ok_or_else(bad)?.parse().map_err(|_| bad())?;
+        }
+        if parts.next().is_some() {
+            return Err(bad());
+        }
+        Ok(CellId(v))
+    }
+}
+
+impl PartialEq<str> for CellId {
+    fn eq(&self, other: &str) -> bool {
+        other.parse::<CellId>().is_ok_and(|o| o == *self)
+    }
+}
+
+impl PartialEq<&str> for CellId {
+    fn eq(&self, other: &&str) -> bool {
+        *self == **other
+    }
+}
+
+impl Serialize for CellId {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for CellId {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<CellId, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
 
 /// One view cell.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -19,8 +90,8 @@ pub struct ViewCell {
 
 impl ViewCell {
     /// The stable identifier used in file names and `--cells`: `x_y_z` of the grid index.
-    pub fn id(&self) -> String {
-        format!("{}_{}_{}", self.index.x, self.index.y, self.index.z)
+    pub fn id(&self) -> CellId {
+        CellId::new(self.index)
     }
 
     pub fn bounds(&self) -> Aabb {
@@ -240,16 +311,13 @@ impl CellGrid {
 
     /// Parses a cell id `x_y_z` and checks it is inside the grid.
     pub fn parse_id(&self, id: &str) -> Result<ViewCell, CellError> {
-        let bad = || CellError::BadCellId(id.to_string());
-        let parts: Vec<&str> = id.trim().split('_').collect();
-        if parts.len() != 3 {
-            return Err(bad());
-        }
-        let mut v = [0i32; 3];
-        for (k, p) in parts.iter().enumerate() {
-            v[k] = p.parse().map_err(|_| bad())?;
-        }
-        self.cell(IVec3::from_array(v)).ok_or_else(bad)
+        self.cell_of(id.parse()?)
+    }
+
+    /// The cell with this id, if it lies inside the grid.
+    pub fn cell_of(&self, id: CellId) -> Result<ViewCell, CellError> {
+        self.cell(id.index())
+            .ok_or_else(|| CellError::BadCellId(id.to_string()))
     }
 }
 
@@ -302,6 +370,23 @@ mod tests {
         assert_eq!(g.parse_id("2_0_0").unwrap(), cells[2]);
         assert!(g.parse_id("9_0_0").is_err());
         assert!(g.parse_id("a_b").is_err());
+        assert!(g.parse_id("1_0_0_0").is_err());
+        assert!(g.parse_id("1__0").is_err());
+    }
+
+    #[test]
+    fn cell_ids_print_parse_and_serialise_as_x_y_z() {
+        let id = CellId::new(IVec3::new(3, 0, -1));
+        assert_eq!(id.to_string(), "3_0_-1");
+        assert_eq!(" 3_0_-1 ".parse::<CellId>().unwrap(), id);
+        assert_eq!(id, "3_0_-1");
+        assert_ne!(id, "3_0_1");
+        assert_eq!(serde_json::to_string(&id).unwrap(), "\"3_0_-1\"");
+        assert_eq!(serde_json::from_str::<CellId>("\"3_0_-1\"").unwrap(), id);
+        for bad in ["", "3_0", "3_0_x", "3_0_-1_2", "3.5_0_0", "99999999999_0_0"] {
+            assert!(bad.parse::<CellId>().is_err(), "{bad}");
+        }
+        assert!(serde_json::from_str::<CellId>("\"nope\"").is_err());
     }
 
     #[test]

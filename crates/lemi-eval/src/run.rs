@@ -6,14 +6,13 @@
 //! [`crate::evaluate_view`] with the measured per-pixel parallax error
 //! ([`lemi_core::parallax_error`]; the layers' per-texel depths are re-recorded for it).
 
-use std::path::Path;
 use std::sync::Arc;
 
 use glam::DVec3;
 use lemi_bake::Baker;
-use lemi_core::bundle::{CellFile, Manifest};
+use lemi_core::bundle::{Bundle, CellFile, Manifest};
 use lemi_core::camera::{Camera, View};
-use lemi_core::cell::{eval_directions, eval_viewpoints, ViewCell};
+use lemi_core::cell::{eval_directions, eval_viewpoints, CellId, ViewCell};
 use lemi_core::parallax_error::{pixel_errors, LayerDepths};
 use lemi_core::Scene;
 use lemi_gpu::{
@@ -37,7 +36,7 @@ pub enum ViewpointSet {
 #[derive(Clone, Debug)]
 pub struct EvalOptions {
     /// Cell ids to evaluate (`None`: every baked cell).
-    pub cells: Option<Vec<String>>,
+    pub cells: Option<Vec<CellId>>,
     pub set: ViewpointSet,
     /// Random interior viewpoints per cell.
     pub random_viewpoints: usize,
@@ -128,24 +127,6 @@ fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Camera, 
     Camera::new(eye, dir, up, fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
 }
 
-/// Reads a baked cell of the bundle and checks it against the manifest.
-fn read_cell(bundle: &Path, manifest: &Manifest, id: &str) -> Result<CellFile, EvalError> {
-    let entry = manifest
-        .cells
-        .iter()
-        .find(|c| c.id == id)
-        .ok_or_else(|| err(format!("cell {id} is not baked in {}", bundle.display())))?;
-    let path = bundle.join(&entry.file);
-    let bytes = std::fs::read(&path).map_err(|e| EvalError::io(path.display().to_string(), e))?;
-    if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
-        return Err(err(format!(
-            "{}: does not match the manifest's hash (changed or damaged after baking)",
-            path.display()
-        )));
-    }
-    CellFile::decode(&bytes).map_err(|e| err(format!("{}: {e}", path.display())))
-}
-
 /// The depth range a crack test allows at reference view depth `r`: one layer's slab (the slab
 /// containing `r`, infinite for the farthest) plus the cell's diagonal (the view depth from a
 /// viewpoint off the centre differs from the distance to the centre by at most that).
@@ -196,8 +177,7 @@ pub struct RenderedView {
 /// layers' per-texel depths, re-recorded for every cell.
 struct LayeredCells<'a> {
     gpu: &'a Gpu,
-    bundle: &'a Path,
-    manifest: &'a Manifest,
+    bundle: &'a Bundle,
     scene: &'a Scene,
     materials: Arc<GpuMaterials>,
     renderer: ImpostorRenderer,
@@ -211,7 +191,7 @@ impl CellRenderer for LayeredCells<'_> {
         let id = cell.id();
         let gpu_err = |what: String| move |e: lemi_gpu::GpuError| err(format!("{what}: {e}"));
         self.current = None;
-        let file = read_cell(self.bundle, self.manifest, &id)?;
+        let file = self.bundle.cell(id).map_err(|e| err(e.to_string()))?;
         let macros = file
             .decode_macros()
             .map_err(|e| err(format!("cell {id}: {e}")))?;
@@ -259,8 +239,7 @@ impl CellRenderer for LayeredCells<'_> {
 /// Evaluates the cells of a bundle. `progress(done, total, what)` is called before every view.
 pub fn evaluate_bundle(
     gpu: &Gpu,
-    bundle: &Path,
-    manifest: &Manifest,
+    bundle: &Bundle,
     scene: &Scene,
     options: &EvalOptions,
     progress: impl FnMut(usize, usize, &str),
@@ -269,10 +248,10 @@ pub fn evaluate_bundle(
         GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
             .map_err(|e| err(format!("uploading materials: {e}")))?,
     );
+    let manifest = bundle.manifest();
     let mut cells = LayeredCells {
         gpu,
         bundle,
-        manifest,
         scene,
         materials,
         renderer: ImpostorRenderer::new(gpu).map_err(|e| err(format!("impostor renderer: {e}")))?,
@@ -284,26 +263,29 @@ pub fn evaluate_bundle(
         },
         current: None,
     };
-    evaluate_with(gpu, bundle, manifest, scene, options, &mut cells, progress)
+    evaluate_with(gpu, bundle, scene, options, &mut cells, progress)
 }
 
 /// Evaluates the cells of a bundle as `renderer` draws them (any far-field strategy): the same
 /// viewpoints, directions, output view and metrics as [`evaluate_bundle`].
 pub fn evaluate_with(
     gpu: &Gpu,
-    bundle: &Path,
-    manifest: &Manifest,
+    bundle: &Bundle,
     scene: &Scene,
     options: &EvalOptions,
     renderer: &mut dyn CellRenderer,
     mut progress: impl FnMut(usize, usize, &str),
 ) -> Result<EvalRun, EvalError> {
-    let ids: Vec<String> = match &options.cells {
+    let manifest = bundle.manifest();
+    let ids: Vec<CellId> = match &options.cells {
         Some(c) => c.clone(),
-        None => manifest.cells.iter().map(|c| c.id.clone()).collect(),
+        None => bundle.cell_ids(),
     };
     if ids.is_empty() {
-        return Err(err(format!("{}: no cells to evaluate", bundle.display())));
+        return Err(err(format!(
+            "{}: no cells to evaluate",
+            bundle.dir().display()
+        )));
     }
     let (w, h, fov_x) = output_view(manifest, options);
     if w == 0 || h == 0 || !(fov_x > 0.0 && fov_x < 180.0) {
@@ -331,7 +313,7 @@ pub fn evaluate_with(
     for id in &ids {
         let cell = manifest
             .grid
-            .parse_id(id)
+            .cell_of(*id)
             .map_err(|e| err(format!("--cells: {e}")))?;
         let mut points = eval_viewpoints(&cell, options.random_viewpoints, options.seed);
         if options.set == ViewpointSet::Corners {
@@ -347,7 +329,7 @@ pub fn evaluate_with(
         .sum();
     let mut done = 0;
     for (cell, points) in &points_per_cell {
-        let id = cell.id();
+        let id = cell.id().to_string();
         progress(done, total, &format!("cell {id}: preparing"));
         renderer.begin_cell(cell)?;
         let mut stats = PixelErrorStats::new();
@@ -423,7 +405,7 @@ pub fn evaluate_with(
         gap.merge(&b.gap);
     }
     let mut result = BundleResult::new(cells)
-        .with_info("bundle", bundle.display().to_string())
+        .with_info("bundle", bundle.dir().display().to_string())
         .with_info("output view", format!("{w}x{h}, {fov_x}° horizontal"))
         .with_info("scene", manifest.scene.sources.join(" "))
         .with_info("adapter", gpu.describe());

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use glam::DVec3;
 use lemi_bake::{BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, LayerTarget, Manifest, SceneRef};
+use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
 use lemi_core::cell::CellGrid;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
@@ -58,14 +58,14 @@ fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Eval
     };
     let baker = Baker::new(gpu, scene, params).unwrap();
     lemi_bake::run(&job, |c| baker.bake(c, |_| {}), |_, _, _| {}).unwrap();
-    let manifest = Manifest::read(dir).unwrap();
+    let bundle = Bundle::open(dir).unwrap();
     let options = EvalOptions {
         set: ViewpointSet::Corners,
         random_viewpoints: 0,
         size: Some((W, H)),
         ..Default::default()
     };
-    evaluate_bundle(gpu, dir, &manifest, scene, &options, |_, _, _| {}).unwrap()
+    evaluate_bundle(gpu, &bundle, scene, &options, |_, _, _| {}).unwrap()
 }
 
 #[test]

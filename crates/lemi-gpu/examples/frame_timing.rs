@@ -32,12 +32,12 @@
 //! buffers, mapping them and building the `Frame` (about 3 ms at 1280×720). llvmpipe's GL has no
 //! timestamp queries (`gpu` shows `-`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
-use lemi_core::bundle::{CellFile, Manifest};
+use lemi_core::bundle::Bundle;
 use lemi_core::camera::{Camera, View};
 use lemi_gpu::{
     BackendChoice, Frame, Gpu, GpuGeometry, GpuScene, ImpostorCell, ImpostorRenderer,
@@ -275,7 +275,8 @@ fn main() -> Result<(), Error> {
         gpu.describe(),
         gpu.has_timestamps()
     );
-    let manifest = Manifest::read(&args.bundle)?;
+    let bundle = Bundle::open(&args.bundle)?;
+    let manifest = bundle.manifest();
     let t = Instant::now();
     let scene = lemi_scene::load(&manifest.scene.sources, &lemi_scene::LoadOptions::default())?;
     println!(
@@ -300,7 +301,7 @@ fn main() -> Result<(), Error> {
     let mut diffs = Vec::new();
     let cells = args.cells.unwrap_or(manifest.cells.len());
     for entry in manifest.cells.iter().take(cells) {
-        let file = CellFile::read(&args.bundle.join(Path::new(&entry.file)))?;
+        let file = bundle.cell(entry.id)?;
         let macros = file.decode_macros()?;
         let cell = ImpostorCell::upload(
             &gpu,

@@ -2,9 +2,9 @@
 //!
 //! This work is based on GI 2002 sec. 3, runtime step 2: impostors of adjacent view cells are
 //! prefetched "in order to avoid varying frame rates". Everything that takes time and does not
-//! need the GPU happens here: reading the file, checking it against the manifest (size, BLAKE3 of
-//! the whole file, the parameters hash, the scene fingerprint, the cell's grid index), decoding the
-//! container, the quads and the PNG macro-textures, copying the near triangles out of the scene and
+//! need the GPU happens here: reading and checking the file with the bundle's one reader
+//! ([`Bundle::verified_cell`]: size, BLAKE3 of the whole file, the container, the parameters hash,
+//! the scene fingerprint, the cell's grid index), decoding the PNG macro-textures, copying the near triangles out of the scene and
 //! laying out the quads' vertex arrays ([`ImpostorCellData::prepare`]). What is left for the render
 //! thread is uploading.
 //!
@@ -21,15 +21,15 @@
 //!   the same way, so the walk never crashes.
 //! - For tests, [`LoaderOptions::delay`] adds an artificial per-cell delay (interrupted on drop).
 
-use std::collections::{HashMap, HashSet};
-use std::path::{Path, PathBuf};
+use std::collections::HashSet;
+use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use lemi_core::bundle::{CellEntry, CellFile, CellHeader, Manifest};
-use lemi_core::cell::CellGrid;
+use lemi_core::bundle::{Bundle, CellFile, CellHeader, VerifiedCell};
+use lemi_core::cell::{CellError, CellId};
 use lemi_core::Scene;
 use lemi_gpu::impostor::ImpostorCellData;
 
@@ -102,11 +102,7 @@ struct State {
 
 /// What every worker needs to load a cell.
 struct Context {
-    bundle: PathBuf,
-    entries: HashMap<String, CellEntry>,
-    params_hash: String,
-    fingerprint: String,
-    grid: CellGrid,
+    bundle: Bundle,
     scene: Arc<Scene>,
     delay: Duration,
 }
@@ -133,11 +129,10 @@ pub struct Loader {
 }
 
 impl Loader {
-    /// Starts the workers for the cells of `manifest` in `bundle_dir`. `scene` is the scene the
-    /// bundle was baked from (near lists index its meshes).
+    /// Starts the workers for the cells of `bundle`. `scene` is the scene the bundle was baked
+    /// from (near lists index its meshes).
     pub fn spawn(
-        manifest: &Manifest,
-        bundle_dir: &Path,
+        bundle: Bundle,
         scene: Arc<Scene>,
         options: LoaderOptions,
     ) -> Result<Loader, RuntimeError> {
@@ -151,15 +146,7 @@ impl Loader {
             state: Mutex::new(State::default()),
             wake: Condvar::new(),
             ctx: Context {
-                bundle: bundle_dir.to_path_buf(),
-                entries: manifest
-                    .cells
-                    .iter()
-                    .map(|e| (e.id.clone(), e.clone()))
-                    .collect(),
-                params_hash: manifest.params_hash.clone(),
-                fingerprint: manifest.scene.fingerprint.clone(),
-                grid: manifest.grid.clone(),
+                bundle,
                 scene,
                 delay: options.delay,
             },
@@ -314,9 +301,9 @@ fn worker(shared: &Shared, tx: &Sender<Loaded>) {
 }
 
 fn cell_path(ctx: &Context, id: &str) -> PathBuf {
-    match ctx.entries.get(id) {
-        Some(e) => ctx.bundle.join(&e.file),
-        None => ctx.bundle.join(lemi_core::bundle::cell_file_name(id)),
+    match id.parse() {
+        Ok(id) => ctx.bundle.cell_path(id),
+        Err(_) => ctx.bundle.dir().to_path_buf(),
     }
 }
 
@@ -328,56 +315,19 @@ fn cell_error(ctx: &Context, id: &str, message: String) -> RuntimeError {
     }
 }
 
-fn short(hash: &str) -> &str {
-    hash.get(..12).unwrap_or(hash)
-}
-
-/// Reads, verifies and decodes one cell.
+/// Reads, verifies (through the bundle's one reader) and decodes one cell.
 fn load(ctx: &Context, id: &str, t0: Instant) -> Result<DecodedCell, RuntimeError> {
     let err = |m: String| cell_error(ctx, id, m);
-    let Some(entry) = ctx.entries.get(id) else {
-        return Err(err(format!("cell {id} is not in the bundle's manifest")));
-    };
-    let path = ctx.bundle.join(&entry.file);
-    let bytes = std::fs::read(&path).map_err(|e| err(format!("cannot read the cell file: {e}")))?;
-    if bytes.len() as u64 != entry.bytes {
-        return Err(err(format!(
-            "is {} bytes, the manifest says {} (changed or damaged after baking); bake it again",
-            bytes.len(),
-            entry.bytes
-        )));
-    }
-    if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
-        return Err(err(
-            "does not match the manifest's BLAKE3 hash (changed or damaged after baking); bake it again"
-                .into(),
-        ));
-    }
-    let file = CellFile::decode(&bytes).map_err(|e| err(e.to_string()))?;
-    if file.header.params_hash != ctx.params_hash {
-        return Err(err(format!(
-            "baked with other parameters than the bundle (parameters hash {}…, the manifest says {}…); bake it again",
-            short(&file.header.params_hash),
-            short(&ctx.params_hash)
-        )));
-    }
-    if file.header.scene_fingerprint != ctx.fingerprint {
-        return Err(err(format!(
-            "baked from another scene than the bundle (fingerprint {}…, the manifest says {}…); bake it again",
-            short(&file.header.scene_fingerprint),
-            short(&ctx.fingerprint)
-        )));
-    }
-    match ctx.grid.parse_id(id) {
-        Ok(cell) if cell.index == file.header.cell.index => {}
-        Ok(_) => {
-            return Err(err(format!(
-                "holds cell {}, not {id}",
-                file.header.cell.id()
-            )))
-        }
-        Err(e) => return Err(err(e.to_string())),
-    }
+    let cell_id: CellId = id.parse().map_err(|e: CellError| err(e.to_string()))?;
+    let VerifiedCell { file, entry } =
+        ctx.bundle
+            .verified_cell(cell_id)
+            .map_err(|e| RuntimeError::Cell {
+                id: id.to_string(),
+                path: e.path,
+                message: e.kind.to_string(),
+            })?;
+    let path = ctx.bundle.cell_path(cell_id);
     let macros = file.decode_macros().map_err(|e| err(e.to_string()))?;
     let CellFile {
         mut header, near, ..
@@ -394,7 +344,7 @@ fn load(ctx: &Context, id: &str, t0: Instant) -> Result<DecodedCell, RuntimeErro
         header,
         bytes: data.cpu_bytes(),
         data,
-        file_bytes: bytes.len() as u64,
+        file_bytes: entry.bytes,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }

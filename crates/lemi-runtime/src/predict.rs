@@ -239,7 +239,7 @@ mod tests {
     }
 
     fn ids(p: &[Prediction]) -> Vec<String> {
-        p.iter().map(|p| p.cell.id()).collect()
+        p.iter().map(|p| p.cell.id().to_string()).collect()
     }
 
     fn centre() -> DVec3 {

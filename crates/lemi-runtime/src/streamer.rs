@@ -33,7 +33,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use lemi_core::bundle::Manifest;
+use lemi_core::bundle::{Bundle, Manifest};
 use lemi_core::cell::CellGrid;
 use lemi_core::Scene;
 use lemi_gpu::impostor::PendingImpostorCell;
@@ -266,25 +266,21 @@ impl Streamer {
                 g.counts.to_array()
             )));
         }
-        if manifest.params.hash() != manifest.params_hash {
-            return Err(bad(format!(
-                "params_hash {} is not the hash of the manifest's params ({}); the manifest was edited or is damaged",
-                manifest.params_hash,
-                manifest.params.hash()
-            )));
-        }
         let mut baked = HashMap::new();
         for e in &manifest.cells {
-            if let Err(err) = g.parse_id(&e.id) {
+            if let Err(err) = g.cell_of(e.id) {
                 return Err(bad(err.to_string()));
             }
-            baked.insert(e.id.clone(), e.bytes);
+            baked.insert(e.id.to_string(), e.bytes);
         }
-        let loader = Loader::spawn(&manifest, bundle_dir, scene, options.loader.clone())?;
+        let grid = manifest.grid.clone();
+        let bundle =
+            Bundle::from_manifest(bundle_dir, manifest).map_err(|e| bad(e.kind.to_string()))?;
+        let loader = Loader::spawn(bundle, scene, options.loader.clone())?;
         Ok(Streamer {
             gpu,
             materials,
-            grid: manifest.grid.clone(),
+            grid,
             bundle: bundle_dir.to_path_buf(),
             baked,
             cache: Cache::new(options.cache_budget_bytes),
@@ -355,7 +351,7 @@ impl Streamer {
     ) -> Result<Vec<String>, RuntimeError> {
         let t0 = Instant::now();
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id());
+        let current = self.grid.locate(position).map(|c| c.id().to_string());
         loop {
             self.receive(&mut ev);
             let wanted = self.wanted(position, velocity, current.as_deref());
@@ -405,7 +401,7 @@ impl Streamer {
             self.stats.seconds += dt;
         }
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id());
+        let current = self.grid.locate(position).map(|c| c.id().to_string());
         self.receive(&mut ev);
         let wanted = self.wanted(position, velocity, current.as_deref());
         self.request(&wanted);
@@ -497,7 +493,7 @@ impl Streamer {
         let mut wanted = Vec::new();
         let mut sum = 0u64;
         for p in predict(position, velocity, &self.grid, &popts) {
-            let id = p.cell.id();
+            let id = p.cell.id().to_string();
             if !self.baked.contains_key(&id) || self.failed.contains_key(&id) {
                 continue;
             }
@@ -655,7 +651,10 @@ impl Streamer {
     }
 
     fn upload_failed(&mut self, id: &str, e: lemi_gpu::GpuError, ev: &mut Events) {
-        let path = self.bundle.join(lemi_core::bundle::cell_file_name(id));
+        let path = match id.parse() {
+            Ok(id) => self.bundle.join(lemi_core::bundle::cell_file_name(id)),
+            Err(_) => self.bundle.clone(),
+        };
         let err = RuntimeError::Cell {
             id: id.to_string(),
             path,

@@ -21,9 +21,10 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{cell_file_name, BakeParams, CellFile, Manifest, SceneRef};
+use lemi_core::bundle::{cell_file_name, BakeParams, Bundle, CellFile, Manifest, SceneRef};
 use lemi_core::camera::Camera;
 use lemi_core::cell::CellGrid;
+use lemi_core::cell::CellId;
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
 use lemi_runtime::{
@@ -254,7 +255,7 @@ fn copy_bundle(from: &Path) -> tempfile::TempDir {
     std::fs::create_dir_all(dir.path().join("cells")).expect("mkdir");
     std::fs::copy(from.join("manifest.json"), dir.path().join("manifest.json")).expect("copy");
     for k in 0..CELLS {
-        let f = cell_file_name(&format!("{k}_0_0"));
+        let f = cell_file_name(id(&format!("{k}_0_0")));
         std::fs::copy(from.join(&f), dir.path().join(&f)).expect("copy cell");
     }
     dir
@@ -265,7 +266,7 @@ fn expected(bundle: &Path) -> HashMap<String, (usize, u64, u64)> {
     (0..CELLS)
         .map(|k| {
             let id = format!("{k}_0_0");
-            let file = CellFile::read(&bundle.join(cell_file_name(&id))).expect("cell file");
+            let file = read_cell(bundle, &id);
             let bytes = file
                 .header
                 .macros
@@ -321,7 +322,7 @@ fn uploaded_size(s: &Setup, bundle: &Path, id: &str) -> u64 {
 }
 
 fn one_shot(s: &Setup, bundle: &Path, id: &str) -> ImpostorCell {
-    let file = CellFile::read(&bundle.join(cell_file_name(id))).expect("cell");
+    let file = read_cell(bundle, id);
     let macros = file.decode_macros().expect("macros");
     ImpostorCell::upload(
         &s.gpu,
@@ -362,7 +363,18 @@ fn pace(start: Instant, frames: usize, dt: f64) {
 }
 
 fn located(p: DVec3) -> Option<String> {
-    grid().locate(p).map(|c| c.id())
+    grid().locate(p).map(|c| c.id().to_string())
+}
+
+fn id(s: &str) -> CellId {
+    s.parse().expect("a cell id")
+}
+
+/// A cell of `bundle`, read through the bundle's reader (every check).
+fn read_cell(bundle: &Path, cell: &str) -> CellFile {
+    Bundle::open(bundle)
+        .and_then(|b| b.cell(id(cell)))
+        .expect("an intact cell")
 }
 
 /// Checks that a frame shows the located cell's own impostors (compared with what its file
@@ -648,14 +660,14 @@ fn damaged_and_mismatched_cells_fall_back_and_the_walk_continues() {
     let bundle = dir.path();
     let want = expected(&fx.bundle);
     // Cell 1: a byte flipped after baking.
-    let damaged = bundle.join(cell_file_name("1_0_0"));
+    let damaged = bundle.join(cell_file_name(id("1_0_0")));
     let mut bytes = std::fs::read(&damaged).expect("read");
     let n = bytes.len();
     bytes[n / 2] ^= 0x20;
     std::fs::write(&damaged, bytes).expect("write");
     // Cell 3: a valid file baked "with other parameters", listed in the manifest with its hash.
-    let other = bundle.join(cell_file_name("3_0_0"));
-    let mut file = CellFile::read(&other).expect("read");
+    let other = bundle.join(cell_file_name(id("3_0_0")));
+    let mut file = read_cell(bundle, "3_0_0");
     file.header.params_hash = "0123456789ab".repeat(5) + "cdef";
     let bytes = file.encode().expect("encode");
     std::fs::write(&other, &bytes).expect("write");
@@ -769,11 +781,9 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
     let Some(fx) = fixture() else { return };
     let dir = copy_bundle(&fx.bundle);
     let bundle = dir.path();
-    std::fs::remove_file(bundle.join(cell_file_name("3_0_0"))).expect("remove");
-    let manifest = Manifest::read(bundle).expect("manifest");
+    std::fs::remove_file(bundle.join(cell_file_name(id("3_0_0")))).expect("remove");
     let loader = lemi_runtime::Loader::spawn(
-        &manifest,
-        bundle,
+        Bundle::open(bundle).expect("bundle"),
         fx.scene.clone(),
         LoaderOptions {
             threads: 1,

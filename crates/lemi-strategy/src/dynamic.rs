@@ -100,14 +100,14 @@
 //! colour came from. Near geometry and background pixels are `NaN`.
 
 use std::collections::{HashMap, HashSet};
-use std::path::{Path, PathBuf};
+
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DMat4, DVec2, DVec3, DVec4};
-use lemi_core::bundle::{CellFile, Manifest, Quad};
+use lemi_core::bundle::{Bundle, Quad};
 use lemi_core::camera::{Camera, View};
-use lemi_core::cell::ViewCell;
+use lemi_core::cell::{CellId, ViewCell};
 use lemi_core::compress::MacroTexture;
 use lemi_core::{Aabb, Face, Mesh, Scene};
 use lemi_gpu::{
@@ -454,7 +454,7 @@ enum ObjId {
 
 /// The current view cell's far field.
 struct CellState {
-    id: String,
+    id: CellId,
     near: Vec<[u32; 2]>,
     /// Entries of `near` that came from the cell file (the rest are too-close far triangles).
     listed_near: usize,
@@ -470,8 +470,7 @@ struct CellState {
 /// Schaufler's dynamically generated impostors, one billboard per far object.
 pub struct DynamicStrategy {
     gpu: Arc<Gpu>,
-    bundle: PathBuf,
-    manifest: Manifest,
+    bundle: Bundle,
     scene: Arc<Scene>,
     materials: Arc<GpuMaterials>,
     options: DynamicOptions,
@@ -487,7 +486,7 @@ pub struct DynamicStrategy {
     full: Option<GpuScene>,
     fallback_renderer: Option<Renderer>,
     /// Cells that failed to load (warned once, then drawn as geometry).
-    failed: HashSet<String>,
+    failed: HashSet<CellId>,
     last: DynamicFrameStats,
     totals: RegenerationReasons,
     report: StrategyReport,
@@ -515,7 +514,6 @@ impl DynamicStrategy {
         Ok(DynamicStrategy {
             gpu: ctx.gpu.clone(),
             bundle: ctx.bundle.clone(),
-            manifest: ctx.manifest.clone(),
             scene: ctx.scene.clone(),
             materials: ctx.materials.clone(),
             options,
@@ -571,7 +569,7 @@ impl DynamicStrategy {
             return Ok(false);
         }
         let t0 = Instant::now();
-        let file = read_cell(&self.bundle, &self.manifest, &id)?;
+        let file = self.bundle.cell(id).map_err(|e| e.to_string())?;
         let near_field = file.header.near_field;
         if !(near_field.is_finite() && near_field >= 0.0) {
             return Err(format!(
@@ -941,7 +939,7 @@ impl Strategy for DynamicStrategy {
         _velocity: DVec3,
         _timeout: Duration,
     ) -> Result<(), StrategyError> {
-        let Some(cell) = self.manifest.grid.locate(eye) else {
+        let Some(cell) = self.bundle.manifest().grid.locate(eye) else {
             return Ok(());
         };
         if self.failed.contains(&cell.id()) {
@@ -957,7 +955,7 @@ impl Strategy for DynamicStrategy {
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         self.last = DynamicFrameStats::default();
         let mut warnings = Vec::new();
-        let located = self.manifest.grid.locate(r.eye);
+        let located = self.bundle.manifest().grid.locate(r.eye);
         let id = located.map(|c| c.id());
         let mut stalled = false;
         let mut ok = false;
@@ -988,7 +986,7 @@ impl Strategy for DynamicStrategy {
             self.report.peak_bytes = self.report.peak_bytes.max(cache_bytes);
             return Ok(StrategyFrame {
                 frame,
-                cell: id,
+                cell: id.map(|i| i.to_string()),
                 near_triangles: self.scene.triangle_count(),
                 far_primitives: 0,
                 stalled: true,
@@ -1054,7 +1052,7 @@ impl Strategy for DynamicStrategy {
         }
         Ok(StrategyFrame {
             frame,
-            cell: id,
+            cell: id.map(|i| i.to_string()),
             near_triangles,
             far_primitives: n_billboards as u64,
             stalled,
@@ -1083,51 +1081,6 @@ impl Strategy for DynamicStrategy {
 
 // ---------------------------------------------------------------------------------------------
 // helpers
-
-/// Reads and verifies a cell file against the manifest (size, BLAKE3, parameters, scene, grid
-/// index); errors name the file.
-fn read_cell(bundle: &Path, manifest: &Manifest, id: &str) -> Result<CellFile, String> {
-    let Some(entry) = manifest.cells.iter().find(|c| c.id == id) else {
-        return Err(format!(
-            "cell {id} (containing the eye) was not baked into {}",
-            bundle.display()
-        ));
-    };
-    let path = bundle.join(&entry.file);
-    let err = |m: String| format!("{}: {m}", path.display());
-    let bytes = std::fs::read(&path).map_err(|e| err(format!("cannot read the cell file: {e}")))?;
-    if bytes.len() as u64 != entry.bytes {
-        return Err(err(format!(
-            "is {} bytes, the manifest says {} (changed or damaged after baking); bake it again",
-            bytes.len(),
-            entry.bytes
-        )));
-    }
-    if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
-        return Err(err(
-            "does not match the manifest's BLAKE3 hash (changed or damaged after baking); bake it again"
-                .into(),
-        ));
-    }
-    let file = CellFile::decode(&bytes).map_err(|e| err(e.to_string()))?;
-    if file.header.params_hash != manifest.params_hash {
-        return Err(err(
-            "baked with other parameters than the bundle's manifest; bake it again".into(),
-        ));
-    }
-    if file.header.scene_fingerprint != manifest.scene.fingerprint {
-        return Err(err(
-            "baked from another scene than the bundle's manifest; bake it again".into(),
-        ));
-    }
-    if file.header.cell.id() != id {
-        return Err(err(format!(
-            "holds cell {}, not {id}",
-            file.header.cell.id()
-        )));
-    }
-    Ok(file)
-}
 
 /// Triangle positions in f64; `None` when an index is out of range.
 fn triangle(scene: &Scene, [m, t]: [u32; 2]) -> Option<[DVec3; 3]> {

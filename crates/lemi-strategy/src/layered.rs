@@ -40,17 +40,17 @@ impl LayeredStrategy {
                 "`{kind}` is not drawn from a layered bundle"
             )));
         }
-        let baked = bundle_strategy(&ctx.manifest);
+        let baked = bundle_strategy(ctx.bundle.manifest());
         if baked != kind {
             return Err(StrategyError::Invalid(format!(
                 "{} was baked for the strategy `{baked}`, not `{kind}`: bake it with `lemi bake --strategy {kind}`",
-                ctx.bundle.display()
+                ctx.bundle.dir().display()
             )));
         }
         let streamer = Streamer::new(
             ctx.gpu.clone(),
-            ctx.manifest.clone(),
-            &ctx.bundle,
+            ctx.bundle.manifest().clone(),
+            ctx.bundle.dir(),
             ctx.scene.clone(),
             ctx.materials.clone(),
             options,

@@ -22,11 +22,10 @@ pub mod eval;
 pub mod layered;
 pub mod warp;
 
-use std::path::PathBuf;
 use std::sync::Arc;
 
 use glam::DVec3;
-use lemi_core::bundle::Manifest;
+use lemi_core::bundle::Bundle;
 use lemi_core::camera::View;
 use lemi_core::Scene;
 use lemi_gpu::{Frame, Gpu, GpuMaterials, RenderOptions};
@@ -108,8 +107,7 @@ pub enum StrategyError {
 #[derive(Clone)]
 pub struct StrategyContext {
     pub gpu: Arc<Gpu>,
-    pub bundle: PathBuf,
-    pub manifest: Manifest,
+    pub bundle: Bundle,
     pub scene: Arc<Scene>,
     pub materials: Arc<GpuMaterials>,
 }

@@ -87,15 +87,14 @@
 //! sub-scene on the CPU first (a transient copy of the far triangles).
 
 use std::collections::{HashSet, VecDeque};
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{DMat4, DVec2, DVec3, DVec4};
-use lemi_core::bundle::{CellFile, Manifest};
+use lemi_core::bundle::{Bundle, CellFile};
 use lemi_core::camera::{perspective_reverse_infinite, view_matrix_basis, View, DEFAULT_NEAR};
-use lemi_core::cell::ViewCell;
+use lemi_core::cell::{CellId, ViewCell};
 use lemi_core::{Face, Mesh, Scene, Vertex};
 use lemi_gpu::{
     Frame, Gpu, GpuGeometry, GpuMaterials, GpuScene, Lighting, RenderOptions, Renderer,
@@ -237,7 +236,7 @@ pub struct FaceRecording {
 /// A cell's recording: one image per baked face, from the cell's centre.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CellRecording {
-    pub id: String,
+    pub id: CellId,
     /// The sample point (the cell's centre).
     pub center: DVec3,
     /// `1 + border`.
@@ -758,8 +757,7 @@ impl Cached {
 /// Depth-image warping of the far field (module docs).
 pub struct WarpStrategy {
     gpu: Arc<Gpu>,
-    bundle: PathBuf,
-    manifest: Manifest,
+    bundle: Bundle,
     scene: Arc<Scene>,
     materials: Arc<GpuMaterials>,
     options: WarpOptions,
@@ -771,7 +769,7 @@ pub struct WarpStrategy {
     /// Most recently used first.
     cache: VecDeque<Cached>,
     /// Cells that could not be read (warned once).
-    failed: HashSet<String>,
+    failed: HashSet<CellId>,
     pending_warnings: Vec<String>,
     last_options: Option<RenderOptions>,
     report: StrategyReport,
@@ -782,14 +780,14 @@ impl WarpStrategy {
     /// The strategy over the bundle of `ctx` (its grid, near lists, faces and resolution).
     pub fn new(ctx: &StrategyContext, options: WarpOptions) -> Result<WarpStrategy, StrategyError> {
         options.validate()?;
-        let res = ctx.manifest.params.resolution;
-        if res == 0 || ctx.manifest.params.faces.is_empty() {
+        let res = ctx.bundle.manifest().params.resolution;
+        if res == 0 || ctx.bundle.manifest().params.faces.is_empty() {
             return Err(StrategyError::Invalid(format!(
                 "{}: the bundle has no faces or a zero resolution to record",
-                ctx.bundle.display()
+                ctx.bundle.dir().display()
             )));
         }
-        let faces = ctx.manifest.params.faces.len() as u64;
+        let faces = ctx.bundle.manifest().params.faces.len() as u64;
         if faces * (res as u64) * (res as u64) > u32::MAX as u64 {
             return Err(StrategyError::Invalid(format!(
                 "resolution {res} with {faces} faces is too large to warp"
@@ -798,7 +796,6 @@ impl WarpStrategy {
         Ok(WarpStrategy {
             gpu: ctx.gpu.clone(),
             bundle: ctx.bundle.clone(),
-            manifest: ctx.manifest.clone(),
             scene: ctx.scene.clone(),
             materials: ctx.materials.clone(),
             options,
@@ -816,7 +813,7 @@ impl WarpStrategy {
 
     /// Pixels per recorded face side (see [`WarpOptions::resolution`]).
     pub fn recording_resolution(&self) -> u32 {
-        let p = &self.manifest.params;
+        let p = &self.bundle.manifest().params;
         let matched = match (p.output_width, p.output_fov_deg) {
             (Some(w), Some(fov)) if w > 0 && fov > 0.0 && fov < 180.0 => {
                 let per_tan = 0.5 * w as f64 / (0.5 * fov.to_radians()).tan();
@@ -855,44 +852,17 @@ impl WarpStrategy {
         Ok(())
     }
 
-    /// Reads and verifies cell `cell`'s file as the runtime loader does (size, BLAKE3, parameters
-    /// hash, scene fingerprint, grid index); `Ok(None)` when the cell was not baked.
+    /// Reads and verifies cell `cell`'s file through the bundle's reader; `Ok(None)` when the cell
+    /// was not baked.
     fn read_cell(&self, cell: &ViewCell) -> Result<Option<CellFile>, String> {
         let id = cell.id();
-        let Some(entry) = self.manifest.cells.iter().find(|c| c.id == id) else {
+        if self.bundle.entry(id).is_none() {
             return Ok(None);
-        };
-        let path = self.bundle.join(&entry.file);
-        let fail = |m: String| format!("cell {id} ({}): {m}; drawing all geometry", path.display());
-        let bytes =
-            std::fs::read(&path).map_err(|e| fail(format!("cannot read the cell file: {e}")))?;
-        if bytes.len() as u64 != entry.bytes {
-            return Err(fail(format!(
-                "is {} bytes, the manifest says {} (changed or damaged after baking); bake it again",
-                bytes.len(),
-                entry.bytes
-            )));
         }
-        if blake3::hash(&bytes).to_hex().as_str() != entry.blake3 {
-            return Err(fail(
-                "does not match the manifest's BLAKE3 hash (changed or damaged after baking); bake it again".into(),
-            ));
-        }
-        let file = CellFile::decode(&bytes).map_err(|e| fail(e.to_string()))?;
-        if file.header.params_hash != self.manifest.params_hash {
-            return Err(fail(
-                "baked with other parameters than the bundle; bake it again".into(),
-            ));
-        }
-        if file.header.scene_fingerprint != self.manifest.scene.fingerprint {
-            return Err(fail(
-                "baked from another scene than the bundle; bake it again".into(),
-            ));
-        }
-        if file.header.cell.index != cell.index {
-            return Err(fail(format!("holds cell {}", file.header.cell.id())));
-        }
-        Ok(Some(file))
+        self.bundle
+            .cell(id)
+            .map(Some)
+            .map_err(|e| format!("cell {id}: {e}; drawing all geometry"))
     }
 
     /// Makes sure cell `cell` is recorded with `options`' shading; returns its cache slot (moved
@@ -946,8 +916,8 @@ impl WarpStrategy {
                 clear: [0; 4],
                 ..*options
             };
-            let mut faces = Vec::with_capacity(self.manifest.params.faces.len());
-            for &face in &self.manifest.params.faces {
+            let mut faces = Vec::with_capacity(self.bundle.manifest().params.faces.len());
+            for &face in &self.bundle.manifest().params.faces {
                 let view = recording_view(cell.center, face, res, half_extent, DEFAULT_NEAR);
                 let Frame { rgba, depth, .. } =
                     self.recorder.render(&far, &view, &record_options)?;
@@ -1028,7 +998,7 @@ impl Strategy for WarpStrategy {
         _velocity: DVec3,
         _timeout: Duration,
     ) -> Result<(), StrategyError> {
-        if let Some(cell) = self.manifest.grid.locate(eye) {
+        if let Some(cell) = self.bundle.manifest().grid.locate(eye) {
             let options = self.last_options.unwrap_or_default();
             self.ensure(&cell, &options)?;
         }
@@ -1037,8 +1007,8 @@ impl Strategy for WarpStrategy {
 
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         self.last_options = Some(*r.options);
-        let located = self.manifest.grid.locate(r.eye);
-        let cell_id = located.as_ref().map(ViewCell::id);
+        let located = self.bundle.manifest().grid.locate(r.eye);
+        let cell_id = located.as_ref().map(|c| c.id().to_string());
         let recorded_now = match &located {
             Some(cell) => self.ensure(cell, r.options)?,
             None => None,

@@ -31,7 +31,7 @@ mod common;
 use common::{add_box, serial, EYE};
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, Manifest, SceneRef};
+use lemi_core::bundle::{BakeParams, Bundle, Manifest, SceneRef};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::CellGrid;
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
@@ -180,8 +180,7 @@ fn fixture() -> Option<&'static Fixture> {
 fn context(fx: &Fixture) -> StrategyContext {
     StrategyContext {
         gpu: fx.gpu.clone(),
-        bundle: fx.bundle.clone(),
-        manifest: Manifest::read(&fx.bundle).expect("manifest"),
+        bundle: Bundle::open(&fx.bundle).expect("bundle"),
         scene: fx.scene.clone(),
         materials: fx.materials.clone(),
     }
@@ -264,8 +263,9 @@ fn at_the_cell_centre_the_frame_matches_the_reference() {
     s.preload(eye, DVec3::ZERO, std::time::Duration::from_secs(60))
         .expect("preload");
     let manifest = Manifest::read(&fx.bundle).expect("manifest");
-    let file =
-        lemi_core::bundle::CellFile::read(&fx.bundle.join(&manifest.cells[0].file)).expect("cell");
+    let file = Bundle::open(&fx.bundle)
+        .and_then(|b| b.cell(manifest.cells[0].id))
+        .expect("cell");
     eprintln!(
         "{} base objects, near field {:.1} m, layers {:?}",
         s.base_objects(),
@@ -439,8 +439,9 @@ fn regenerates_only_when_a_validity_angle_exceeds_a_pixel() {
     // Far triangles lie outside the near-field cube and every object's centre is at least 2 radii
     // from the eye, so billboards are at least 2/3 of the near-field distance away.
     let manifest = Manifest::read(&fx.bundle).expect("manifest");
-    let file =
-        lemi_core::bundle::CellFile::read(&fx.bundle.join(&manifest.cells[0].file)).expect("cell");
+    let file = Bundle::open(&fx.bundle)
+        .and_then(|b| b.cell(manifest.cells[0].id))
+        .expect("cell");
     let nearest = 2.0 / 3.0 * file.header.near_field;
     let (_, beta) = view_angles(&v).expect("angles");
     let small = 0.1 * beta * nearest;
@@ -550,7 +551,7 @@ fn a_damaged_cell_is_drawn_as_geometry_with_one_warning() {
     bytes[k] ^= 0x55;
     std::fs::write(&damaged, bytes).expect("write");
     let mut ctx = context(fx);
-    ctx.bundle = dir.path().to_path_buf();
+    ctx.bundle = Bundle::open(dir.path()).expect("bundle");
     let mut s = DynamicStrategy::new(&ctx, test_options()).expect("strategy");
     let mut warnings = Vec::new();
     for eye in [centre(0), centre(1), centre(1) + DVec3::X, centre(0)] {
@@ -770,8 +771,7 @@ fn timings_on_a_city_walk() {
     let scene = Arc::new(scene);
     let ctx = StrategyContext {
         gpu: gpu.clone(),
-        bundle: bundle.clone(),
-        manifest: Manifest::read(&bundle).expect("manifest"),
+        bundle: Bundle::open(&bundle).expect("bundle"),
         scene: scene.clone(),
         materials,
     };

@@ -23,7 +23,7 @@ mod common;
 
 use common::{add_box, grid, serial, EYE};
 use glam::DVec3;
-use lemi_core::bundle::{BakeParams, Manifest};
+use lemi_core::bundle::{BakeParams, Bundle};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::ViewCell;
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
@@ -154,10 +154,9 @@ fn fixture() -> Option<&'static Fixture> {
             common::bake(&gpu, &scene, &params(), &bundle, "warp");
             eprintln!("baked 2 cells in {:.1} s", t.elapsed().as_secs_f64());
             for id in ["0_0_0", "1_0_0"] {
-                let file = lemi_core::bundle::CellFile::read(
-                    &bundle.join(lemi_core::bundle::cell_file_name(id)),
-                )
-                .expect("cell file");
+                let file = lemi_core::bundle::Bundle::open(&bundle)
+                    .and_then(|b| b.cell(id.parse().expect("id")))
+                    .expect("cell file");
                 eprintln!(
                     "cell {id}: near field {:.1} m, {} near triangles of {}, {} layers",
                     file.header.near_field,
@@ -191,8 +190,7 @@ fn setup() -> Option<Setup> {
     let renderer = Renderer::new(&gpu).expect("renderer");
     let ctx = StrategyContext {
         gpu,
-        bundle: fx.bundle.clone(),
-        manifest: Manifest::read(&fx.bundle).expect("manifest"),
+        bundle: Bundle::open(&fx.bundle).expect("bundle"),
         scene: fx.scene.clone(),
         materials,
     };
@@ -581,12 +579,14 @@ fn cells_are_recorded_once_evicted_by_the_lru_and_a_damaged_one_falls_back() {
     std::fs::create_dir_all(dir.path().join("cells")).expect("mkdir");
     for f in [
         "manifest.json".to_string(),
-        lemi_core::bundle::cell_file_name("0_0_0"),
-        lemi_core::bundle::cell_file_name("1_0_0"),
+        lemi_core::bundle::cell_file_name("0_0_0".parse().expect("id")),
+        lemi_core::bundle::cell_file_name("1_0_0".parse().expect("id")),
     ] {
-        std::fs::copy(s.ctx.bundle.join(&f), dir.path().join(&f)).expect("copy");
+        std::fs::copy(s.ctx.bundle.dir().join(&f), dir.path().join(&f)).expect("copy");
     }
-    let damaged = dir.path().join(lemi_core::bundle::cell_file_name("1_0_0"));
+    let damaged = dir.path().join(lemi_core::bundle::cell_file_name(
+        "1_0_0".parse().expect("id"),
+    ));
     let mut bytes = std::fs::read(&damaged).expect("read");
     let mid = bytes.len() / 2;
     bytes[mid] ^= 0x5a;
@@ -623,7 +623,7 @@ fn cells_are_recorded_once_evicted_by_the_lru_and_a_damaged_one_falls_back() {
 
     // ... and a damaged cell falls back to all geometry, warning once.
     let ctx = StrategyContext {
-        bundle: dir.path().to_path_buf(),
+        bundle: Bundle::open(dir.path()).expect("bundle"),
         ..s.ctx.clone()
     };
     let mut st = WarpStrategy::new(&ctx, WarpOptions::default()).expect("strategy");

@@ -606,7 +606,7 @@ pub fn auto_path(
                 && (g.half - c.half).abs().max_element() <= 1e-6 * grid.cell_size.max(1.0)
         });
         if !ok {
-            return Err(PathError::CellNotInGrid(c.id()));
+            return Err(PathError::CellNotInGrid(c.id().to_string()));
         }
         cells.insert(c.index.to_array(), *c);
     }

@@ -9,10 +9,13 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::cell::{CellGrid, ViewCell};
+use crate::cell::{CellGrid, CellId, ViewCell};
 use crate::compress::MacroTexture;
 use crate::container::{self, Blob, ContainerError};
 use crate::Face;
+
+mod reader;
+pub use reader::{read_cell_file, Bundle, CellCheck, VerifiedCell};
 
 /// Version of the manifest and cell files. Readers reject any other version.
 pub const BUNDLE_VERSION: u32 = 2;
@@ -106,7 +109,7 @@ pub struct SceneRef {
 /// One baked cell in the manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CellEntry {
-    pub id: String,
+    pub id: CellId,
     /// Path relative to the bundle directory.
     pub file: String,
     pub bytes: u64,
@@ -224,23 +227,97 @@ pub struct CellHeader {
     pub stats: CellStats,
 }
 
-/// Errors reading or writing a bundle; each names the file.
+/// An error reading or writing a bundle: the file (or bundle directory) and what is wrong with it.
 #[derive(Debug, thiserror::Error)]
-pub enum BundleError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
+#[error("{}: {kind}", path.display())]
+pub struct BundleError {
+    pub path: PathBuf,
+    pub kind: BundleErrorKind,
+}
+
+impl BundleError {
+    pub fn new(path: impl Into<PathBuf>, kind: BundleErrorKind) -> BundleError {
+        BundleError {
+            path: path.into(),
+            kind,
+        }
+    }
+
+    fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> BundleError {
+        BundleError::new(path, BundleErrorKind::Invalid(message.into()))
+    }
+}
+
+/// What is wrong with a bundle file. The messages say what to do where something can be done.
+#[derive(Debug, thiserror::Error)]
+pub enum BundleErrorKind {
+    #[error("{0}")]
+    Io(#[source] std::io::Error),
+    /// Truncated, a checksum that does not match, another version, a malformed header or blob.
+    #[error("{0}")]
+    Container(#[source] ContainerError),
+    /// A manifest that is not one, or one that contradicts itself.
+    #[error("{0}")]
+    Invalid(String),
+    /// The cell is not listed in the manifest (`path` is the bundle directory).
+    #[error(
+        "cell {id} was not baked into this bundle; baked cells: {}",
+        list_ids(baked)
+    )]
+    NotBaked { id: CellId, baked: Vec<CellId> },
+    /// A point outside every cell of the bundle's grid (`path` is the bundle directory).
+    #[error("({:.2}, {:.2}, {:.2}) is outside the baked region (grid origin {origin:?}, {cell_size} m cells, {counts:?})", point[0], point[1], point[2])]
+    OutsideGrid {
+        point: [f64; 3],
+        origin: [f64; 3],
+        cell_size: f64,
+        counts: [i32; 3],
     },
-    #[error("{path}: {source}")]
-    Container {
-        path: PathBuf,
-        #[source]
-        source: ContainerError,
+    #[error("is {actual} bytes, the bundle records {expected} (changed or damaged after baking); bake it again")]
+    Size { actual: u64, expected: u64 },
+    #[error("does not match the BLAKE3 hash the bundle records for it (changed or damaged after baking); bake it again")]
+    Hash,
+    #[error("baked with other parameters than the bundle (parameters hash {}…, the manifest says {}…); bake it again", short(found), short(expected))]
+    Params { found: String, expected: String },
+    #[error("baked from another scene than the bundle (fingerprint {}…, the manifest says {}…); bake it again", short(found), short(expected))]
+    Scene { found: String, expected: String },
+    /// The cell file holds another cell than the one asked for (or, resuming, the same index at
+    /// another place or size).
+    #[error("holds cell {found}{}, not {expected}", if *moved { " at another position or size" } else { "" })]
+    WrongCell {
+        found: CellId,
+        expected: CellId,
+        moved: bool,
     },
-    #[error("{path}: {message}")]
-    Invalid { path: PathBuf, message: String },
+    /// The scene given to draw the bundle with is not the one it was baked from (`path` is the
+    /// manifest).
+    #[error("was baked from another scene (fingerprint {}…) than the one given (fingerprint {}…); give the scene it was baked from", short(baked), short(given))]
+    OtherScene { baked: String, given: String },
+}
+
+impl BundleErrorKind {
+    /// Whether the file is unusable as it is on disk (damaged, stale or foreign) rather than
+    /// missing from the manifest or the grid.
+    pub fn is_damage(&self) -> bool {
+        !matches!(
+            self,
+            BundleErrorKind::NotBaked { .. } | BundleErrorKind::OutsideGrid { .. }
+        )
+    }
+}
+
+fn short(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
+}
+
+fn list_ids(ids: &[CellId]) -> String {
+    if ids.is_empty() {
+        return "none".into();
+    }
+    ids.iter()
+        .map(|i| i.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Path of the manifest in a bundle directory.
@@ -249,46 +326,43 @@ pub fn manifest_path(bundle: &Path) -> PathBuf {
 }
 
 /// Relative path of a cell file.
-pub fn cell_file_name(id: &str) -> String {
+pub fn cell_file_name(id: CellId) -> String {
     format!("cells/{id}.lemicell")
 }
 
 impl Manifest {
+    /// Reads `manifest.json` and checks its format and version (what [`Bundle::open`] builds
+    /// on; use that to read cells).
     pub fn read(bundle: &Path) -> Result<Manifest, BundleError> {
         let path = manifest_path(bundle);
-        let bytes = std::fs::read(&path).map_err(|source| BundleError::Io {
-            path: path.clone(),
-            source,
-        })?;
-        let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| BundleError::Invalid {
-            path: path.clone(),
-            message: format!("not a valid lemi manifest: {e}"),
-        })?;
+        let bytes =
+            std::fs::read(&path).map_err(|e| BundleError::new(&path, BundleErrorKind::Io(e)))?;
+        let m: Manifest = serde_json::from_slice(&bytes)
+            .map_err(|e| BundleError::invalid(&path, format!("not a valid lemi manifest: {e}")))?;
         if m.format != MANIFEST_FORMAT {
-            return Err(BundleError::Invalid {
+            return Err(BundleError::invalid(
                 path,
-                message: format!("format is `{}`, expected `{MANIFEST_FORMAT}`", m.format),
-            });
+                format!("format is `{}`, expected `{MANIFEST_FORMAT}`", m.format),
+            ));
         }
         if m.version != BUNDLE_VERSION {
-            return Err(BundleError::Invalid {
+            return Err(BundleError::invalid(
                 path,
-                message: format!(
+                format!(
                     "bundle version {} is not supported (this lemi reads version {BUNDLE_VERSION})",
                     m.version
                 ),
-            });
+            ));
         }
         Ok(m)
     }
 
     pub fn write(&self, bundle: &Path) -> Result<(), BundleError> {
         let path = manifest_path(bundle);
-        let json = serde_json::to_vec_pretty(self).map_err(|e| BundleError::Invalid {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
-        container::write_atomic(&path, &json).map_err(|source| BundleError::Io { path, source })
+        let json = serde_json::to_vec_pretty(self)
+            .map_err(|e| BundleError::invalid(&path, e.to_string()))?;
+        container::write_atomic(&path, &json)
+            .map_err(|e| BundleError::new(path, BundleErrorKind::Io(e)))
     }
 }
 
@@ -396,18 +470,6 @@ impl CellFile {
                 })
             })
             .collect()
-    }
-
-    /// Reads and verifies a cell file.
-    pub fn read(path: &Path) -> Result<CellFile, BundleError> {
-        let bytes = std::fs::read(path).map_err(|source| BundleError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        CellFile::decode(&bytes).map_err(|source| BundleError::Container {
-            path: path.to_path_buf(),
-            source,
-        })
     }
 }
 
