@@ -20,40 +20,27 @@
 //! - the result is a [`CellFile`]: quads with world-space corners, PNG macro-textures, near list,
 //!   statistics (GI 2002 Table 2 and more).
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use glam::DVec3;
 use lemi_core::bundle::{
-    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, LayerTarget, Layering,
-    MacroInfo, Quad,
+    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, MacroInfo, Quad,
 };
 use lemi_core::cell::ViewCell;
-use lemi_core::classify::{classify_slabs, TriRef, TriangleBounds};
-use lemi_core::clip::{clip_to_slab, ClipVertex};
-use lemi_core::compress::{
-    compress_cell, CompressOptions, FaceLayers, LayerImage, MicroTextureOptions,
-};
-use lemi_core::placement::Placement;
-use lemi_core::{Aabb, Face, Scene};
-use lemi_gpu::recorder::Coverage;
-use lemi_gpu::{Gpu, GpuMaterials, LayerRecorder, Lighting, MaterialRun};
+use lemi_core::compress::{compress_cell, CompressOptions, MicroTextureOptions};
+use lemi_core::layering::CellPlan;
+use lemi_core::parallax_error::LayerDepths;
+use lemi_core::Face;
+use lemi_core::Scene;
+use lemi_gpu::cell_recorder::{CellRecorder, RecordError, Recording};
+use lemi_gpu::Gpu;
 use rayon::prelude::*;
 
-use crate::clip_border::mark_clip_borders;
 use crate::BakeError;
 
-pub use crate::layering::{plan_cell, CellPlan, FacePlan};
-
-/// What a baker needs once per scene: the scene, its triangles in f64, its materials on the GPU and
-/// the layer recorder.
+/// What a baker needs once per scene: the layer recording of [`CellRecorder`] (scene, triangle
+/// bounds, materials on the GPU, recorder) and the parameters.
 pub struct Baker<'a> {
-    pub scene: &'a Scene,
-    pub params: BakeParams,
-    pub lighting: Lighting,
-    tris: TriangleBounds,
-    materials: Arc<GpuMaterials>,
-    recorder: LayerRecorder,
+    recorder: CellRecorder<'a>,
 }
 
 /// A stage of one cell, reported for progress.
@@ -87,71 +74,24 @@ impl std::fmt::Display for Stage {
     }
 }
 
-/// The placement of every baked face of `cell`, for `params.layering` ([`layering`]). The
-/// equidistant layering needs the scene's bounds: use [`place_cell_in`] (this is an error for it).
-pub fn place_cell(params: &BakeParams, cell: &ViewCell) -> Result<Vec<Placement>, BakeError> {
-    Ok(plan_cell(params, cell, None)?.placements())
-}
-
-/// [`place_cell`] for a scene with bounding box `scene_bounds` (what the bake places, for every
-/// layering).
-pub fn place_cell_in(
-    params: &BakeParams,
-    cell: &ViewCell,
-    scene_bounds: &Aabb,
-) -> Result<Vec<Placement>, BakeError> {
-    Ok(plan_cell(params, cell, Some(scene_bounds))?.placements())
-}
-
-/// How the layers of `layering` are recorded and compressed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Recording {
-    coverage: Coverage,
-    /// Flag clip-border texels and close the near-field seam (the crack-free recording of the
-    /// optimal bake).
-    crack_free: bool,
-    gap_fill: bool,
-}
-
-impl Recording {
-    fn of(layering: Layering) -> Recording {
-        match layering {
-            Layering::Optimal | Layering::Single => Recording {
-                coverage: Coverage::Conservative,
-                crack_free: true,
-                gap_fill: true,
-            },
-            Layering::Equidistant { .. } => Recording {
-                coverage: Coverage::CentreSampled,
-                crack_free: false,
-                gap_fill: false,
-            },
-        }
-    }
-}
-
 impl<'a> Baker<'a> {
-    /// Prepares baking `scene` with `params`: triangle bounds, materials on the GPU, recorder.
+    /// Prepares baking `scene` with `params` (checked first): triangle bounds, materials on the
+    /// GPU, recorder.
     pub fn new(gpu: &Gpu, scene: &'a Scene, params: BakeParams) -> Result<Baker<'a>, BakeError> {
-        validate_params(&params)?;
-        let gpu_err = |what: &str| {
-            let what = what.to_string();
-            move |e: lemi_gpu::GpuError| BakeError::Invalid(format!("{what}: {e}"))
-        };
-        let materials = Arc::new(
-            GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
-                .map_err(gpu_err("uploading the scene's materials"))?,
-        );
-        let recorder = LayerRecorder::new(gpu, params.resolution)
-            .map_err(gpu_err("creating the layer recorder"))?;
-        Ok(Baker {
-            scene,
-            params,
-            lighting: Lighting::default(),
-            tris: TriangleBounds::new(scene),
-            materials,
-            recorder,
-        })
+        params.validate()?;
+        let recorder = CellRecorder::new(gpu, scene, params).map_err(|source| BakeError::Gpu {
+            what: "preparing the scene for recording (materials, layer recorder)",
+            source,
+        })?;
+        Ok(Baker { recorder })
+    }
+
+    pub fn scene(&self) -> &'a Scene {
+        self.recorder.scene
+    }
+
+    pub fn params(&self) -> &BakeParams {
+        &self.recorder.params
     }
 
     /// Bakes one cell; `on_stage` is told when each stage starts.
@@ -160,13 +100,9 @@ impl<'a> Baker<'a> {
         cell: &ViewCell,
         mut on_stage: impl FnMut(&Stage),
     ) -> Result<CellFile, BakeError> {
-        let cell_err = |message: String| BakeError::Cell {
-            cell: cell.id(),
-            message,
-        };
         let mut seconds: Vec<(String, f64)> = Vec::new();
         let center = cell.center;
-        let params = &self.params;
+        let params = &self.recorder.params;
         let res = params.resolution;
 
         on_stage(&Stage::Placement);
@@ -177,11 +113,23 @@ impl<'a> Baker<'a> {
 
         on_stage(&Stage::Classify);
         let t = Instant::now();
-        let class = classify_slabs(&self.tris, center, near_field, &params.faces, &plan.slabs());
+        let class = self.recorder.classify(cell, &plan);
         seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
 
         let t_record = Instant::now();
-        let rec = self.record_layers(cell, &plan, &class, false, &mut on_stage)?;
+        let rec = self.recorder.record_layers(
+            cell,
+            &plan,
+            &class,
+            false,
+            &mut |face, layer, layers| {
+                on_stage(&Stage::Record {
+                    face,
+                    layer,
+                    layers,
+                })
+            },
+        )?;
         let mut faces = rec.faces;
         let opaque_recorded = rec.opaque_recorded;
         let record_s = t_record.elapsed().as_secs_f64();
@@ -198,8 +146,11 @@ impl<'a> Baker<'a> {
             },
             ..Default::default()
         };
-        let compressed = compress_cell(&mut faces, &options)
-            .map_err(|e| cell_err(format!("compressing: {e}")))?;
+        let compressed =
+            compress_cell(&mut faces, &options).map_err(|source| BakeError::Compress {
+                cell: cell.id(),
+                source,
+            })?;
         drop(faces);
         seconds.push(("compress".into(), t.elapsed().as_secs_f64()));
 
@@ -210,7 +161,10 @@ impl<'a> Baker<'a> {
             .par_iter()
             .map(|m| encode_png(&m.rgba, m.width, m.height))
             .collect::<Result<_, _>>()
-            .map_err(|e| cell_err(e.to_string()))?;
+            .map_err(|source| BakeError::Encode {
+                cell: cell.id(),
+                source,
+            })?;
         seconds.push(("png".into(), t.elapsed().as_secs_f64()));
 
         let quads: Vec<Quad> = compressed
@@ -296,291 +250,18 @@ impl<'a> Baker<'a> {
     /// The layers of `cell` and what each records, for this baker's parameters and scene (what
     /// [`Baker::bake`] and [`Baker::record_depths`] use).
     pub fn plan(&self, cell: &ViewCell) -> Result<CellPlan, BakeError> {
-        plan_cell(&self.params, cell, Some(&self.scene.bounds))
+        Ok(self.recorder.plan(cell)?)
     }
 
-    /// Records the layers of `cell` again and keeps only their per-texel depths along the face
-    /// axis (for measuring the geometric error of a baked cell, `lemi_core::parallax_error`). The
-    /// result is what the bake of the same cell recorded, before compression (same layering, same
-    /// layers, same recorded depth ranges and coverage).
-    pub fn record_depths(
-        &self,
-        cell: &ViewCell,
-    ) -> Result<lemi_core::parallax_error::LayerDepths, BakeError> {
-        let plan = self.plan(cell)?;
-        let class = classify_slabs(
-            &self.tris,
-            cell.center,
-            plan.near_field,
-            &self.params.faces,
-            &plan.slabs(),
-        );
-        let rec = self.record_layers(cell, &plan, &class, true, &mut |_| {})?;
-        Ok(lemi_core::parallax_error::LayerDepths {
-            center: cell.center,
-            res: self.params.resolution,
-            faces: self.params.faces.clone(),
-            distances: plan
-                .faces
-                .iter()
-                .map(|f| f.placement.layers.iter().map(|l| l.distance).collect())
-                .collect(),
-            depth: rec.depths,
-        })
-    }
-
-    /// Clips and records every (face, layer) of a cell: the layer images with clip-border flags
-    /// (or, with `depths_only`, only the per-texel depths).
-    fn record_layers(
-        &self,
-        cell: &ViewCell,
-        plan: &CellPlan,
-        class: &lemi_core::classify::Classification,
-        depths_only: bool,
-        on_stage: &mut dyn FnMut(&Stage),
-    ) -> Result<Recorded, BakeError> {
-        let cell_err = |message: String| BakeError::Cell {
-            cell: cell.id(),
-            message,
-        };
-        let center = cell.center;
-        let res = self.params.resolution;
-        let near_field = plan.near_field;
-        let recording = Recording::of(self.params.layering);
-        let mut out = Recorded {
-            faces: Vec::new(),
-            depths: Vec::new(),
-            opaque_recorded: 0,
-            near_seam_texels: 0,
-            clip_seconds: 0.0,
-        };
-        for (slot, face_plan) in plan.faces.iter().enumerate() {
-            let face = face_plan.face;
-            let placement = &face_plan.placement;
-            let slabs = &face_plan.slabs;
-            let n = placement.layers.len();
-            // clip every slab of this face on the CPU, in parallel (to the depth range the layer
-            // records: its slab, or for overlapping slabs the extended range)
-            let t = Instant::now();
-            let prepared: Vec<Slab> = (0..n)
-                .into_par_iter()
-                .map(|k| {
-                    self.prepare_slab(&class.bins[slot][k], center, face, slabs.lo(k), slabs.hi(k))
-                })
-                .collect();
-            out.clip_seconds += t.elapsed().as_secs_f64();
-            let mut images = Vec::with_capacity(n);
-            let mut depths = Vec::with_capacity(n);
-            for (k, slab) in prepared.into_iter().enumerate() {
-                on_stage(&Stage::Record {
-                    face,
-                    layer: k,
-                    layers: n,
-                });
-                let (lo, hi) = (slabs.lo(k), slabs.hi(k));
-                let near_plane = 0.5 * lo.min(near_field);
-                let frame = self
-                    .recorder
-                    .record_with(
-                        &self.materials,
-                        DVec3::ZERO,
-                        face,
-                        &slab.vertices,
-                        &slab.runs,
-                        near_plane,
-                        &self.lighting,
-                        recording.coverage,
-                    )
-                    .map_err(|e| cell_err(format!("recording face {face} layer {k}: {e}")))?;
-                if depths_only {
-                    depths.push(frame.depth);
-                    continue;
-                }
-                let mut border = vec![false; (res * res) as usize];
-                if recording.crack_free {
-                    let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
-                    mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
-                }
-                let image = LayerImage::from_parts(res, frame.rgba, border)
-                    .map_err(|e| cell_err(format!("face {face} layer {k}: {e}")))?;
-                out.opaque_recorded += image.opaque_count();
-                images.push(image);
-            }
-            if depths_only {
-                out.depths.push(depths);
-            } else {
-                if let Some(inner) = images.last_mut().filter(|_| recording.crack_free) {
-                    let along = cell.half.abs().dot(face.forward().abs());
-                    let near = self.prepare_slab(&class.near, center, face, along, near_field);
-                    let frame = self
-                        .recorder
-                        .record(
-                            &self.materials,
-                            DVec3::ZERO,
-                            face,
-                            &near.vertices,
-                            &near.runs,
-                            0.5 * along.max(1e-3),
-                            &self.lighting,
-                        )
-                        .map_err(|e| cell_err(format!("recording face {face} near field: {e}")))?;
-                    out.near_seam_texels += close_near_seam(inner, &frame.rgba);
-                }
-                out.faces.push(FaceLayers {
-                    face,
-                    distances: placement.layers.iter().map(|l| l.distance).collect(),
-                    layers: images,
-                });
-            }
-        }
-        Ok(out)
-    }
-
-    /// Clips the triangles of one bin to the slab `[near, far]` of `face`, sorted by material, with
-    /// positions relative to `center`.
-    fn prepare_slab(&self, bin: &[TriRef], center: DVec3, face: Face, near: f64, far: f64) -> Slab {
-        let meshes = &self.scene.meshes;
-        let mut refs: Vec<TriRef> = bin.to_vec();
-        refs.sort_by_key(|r| (meshes[r.mesh as usize].material, r.mesh, r.tri));
-        let mut vertices: Vec<ClipVertex> = Vec::with_capacity(3 * refs.len());
-        let mut runs: Vec<MaterialRun> = Vec::new();
-        for r in &refs {
-            let mesh = &meshes[r.mesh as usize];
-            let i = 3 * r.tri as usize;
-            let Some(idx) = mesh.indices.get(i..i + 3) else {
-                continue;
-            };
-            let Some(tri) = idx
-                .iter()
-                .map(|&v| mesh.vertices.get(v as usize))
-                .collect::<Option<Vec<_>>>()
-            else {
-                continue;
-            };
-            let tri = [0, 1, 2].map(|k| ClipVertex::from_vertex(tri[k], center));
-            let first = (vertices.len() / 3) as u32;
-            let added = clip_to_slab(&tri, face, near, far, &mut vertices) as u32;
-            if added == 0 {
-                continue;
-            }
-            match runs.last_mut() {
-                Some(run) if run.material == mesh.material => run.count += added,
-                _ => runs.push(MaterialRun {
-                    material: mesh.material,
-                    first,
-                    count: added,
-                }),
-            }
-        }
-        Slab { vertices, runs }
+    /// The per-texel depths of the layers of `cell` as the bake records them
+    /// ([`CellRecorder::record_depths`]).
+    pub fn record_depths(&self, cell: &ViewCell) -> Result<LayerDepths, BakeError> {
+        Ok(self.recorder.record_depths(cell)?)
     }
 }
 
-/// What [`Baker::record_layers`] produced.
-struct Recorded {
-    faces: Vec<FaceLayers>,
-    depths: Vec<Vec<Vec<f32>>>,
-    opaque_recorded: u64,
-    /// Texels added to the innermost layers by [`close_near_seam`].
-    near_seam_texels: u64,
-    clip_seconds: f64,
-}
-
-/// Closes the seam between the near geometry and the innermost layer: the near geometry is drawn
-/// exactly, the innermost layer with up to α of parallax, so a surface crossing the near-field
-/// border can open a gap of up to a pixel between them (found by the no-crack test). Gap filling
-/// (GI 2002 sec. 5.1) closes such gaps between two layers; here the near field plays the closer
-/// layer: every transparent texel of the innermost layer that touches one of its opaque texels
-/// (8-neighbourhood) and where the near geometry just inside the border (recorded into `near`, the
-/// same face projection) is opaque takes the near geometry's colour. The added texels are flagged
-/// as clip-border texels, so they never hide farther layers. Returns the number of texels added.
-pub fn close_near_seam(inner: &mut LayerImage, near: &[u8]) -> u64 {
-    let res = inner.res as usize;
-    if near.len() != inner.rgba.len() {
-        return 0;
+impl From<RecordError> for BakeError {
+    fn from(e: RecordError) -> BakeError {
+        BakeError::Record(Box::new(e))
     }
-    let opaque = inner.opaque_mask();
-    let touches = lemi_core::compress::layer_image::any3x3(&opaque, inner.res, false);
-    let mut added = 0;
-    for i in 0..res * res {
-        if !opaque[i] && touches[i] && near[4 * i + 3] >= 128 {
-            let c = [near[4 * i], near[4 * i + 1], near[4 * i + 2], 255];
-            inner.set_texel(i, c);
-            inner.border[i] = true;
-            added += 1;
-        }
-    }
-    added
-}
-
-/// The clipped triangles of one slab and their material runs.
-struct Slab {
-    vertices: Vec<ClipVertex>,
-    runs: Vec<MaterialRun>,
-}
-
-/// Checks the parameters a user controls before any work starts.
-pub fn validate_params(p: &BakeParams) -> Result<(), BakeError> {
-    let bad = |m: String| Err(BakeError::Invalid(m));
-    if !(p.cell_size.is_finite() && p.cell_size > 0.0) {
-        return bad(format!(
-            "--cell-size must be a positive number of metres (got {})",
-            p.cell_size
-        ));
-    }
-    if let Some(h) = p.cell_height {
-        if !(h.is_finite() && h > 0.0) {
-            return bad(format!(
-                "--cell-height must be a positive number of metres (got {h})"
-            ));
-        }
-    }
-    if !(16..=8192).contains(&p.resolution) {
-        return bad(format!(
-            "--resolution must be between 16 and 8192 texels (got {})",
-            p.resolution
-        ));
-    }
-    if p.faces.is_empty() {
-        return bad("no faces to bake".into());
-    }
-    if !(p.alpha.is_finite() && p.alpha > 0.0 && p.alpha < 0.5) {
-        return bad(format!(
-            "the parallax angle must be in (0, 0.5) radians (got {})",
-            p.alpha
-        ));
-    }
-    match p.target {
-        LayerTarget::Layers(n) if n == 0 || n > 4096 => {
-            return bad(format!("--layers must be between 1 and 4096 (got {n})"))
-        }
-        LayerTarget::NearField(d) if !(d.is_finite() && d > 0.5 * p.cell_size) => {
-            return bad(format!(
-                "--near-field must be a distance beyond the cell's half size {} m (got {d})",
-                0.5 * p.cell_size
-            ))
-        }
-        _ => {}
-    }
-    if p.micro_grid == 0 || p.micro_grid > p.resolution {
-        return bad(format!(
-            "the micro-texture grid must be 1..={} texels (got {})",
-            p.resolution, p.micro_grid
-        ));
-    }
-    if !(0.0..=1.0).contains(&p.micro_threshold) {
-        return bad(format!(
-            "the micro-texture threshold must be in [0, 1] (got {})",
-            p.micro_threshold
-        ));
-    }
-    if let Layering::Equidistant { overlap } = p.layering {
-        if !(overlap.is_finite() && (0.0..=1.0).contains(&overlap)) {
-            return bad(format!(
-                "the equidistant layering's `overlap` (--overlap) must be a fraction of a slab's \
-                 depth in [0, 1] (got {overlap})"
-            ));
-        }
-    }
-    Ok(())
 }

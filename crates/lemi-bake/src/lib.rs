@@ -3,9 +3,7 @@
 //! crack-free GPU recording, compression ([`cell_bake`]).
 
 pub mod cell_bake;
-pub mod clip_border;
-pub mod layering;
 pub mod orchestrate;
 
-pub use cell_bake::{place_cell, validate_params, Baker, Stage};
+pub use cell_bake::{Baker, Stage};
 pub use orchestrate::{merge, run, BakeError, BakeJob, CellOutcome, RunSummary, ShardRecord};

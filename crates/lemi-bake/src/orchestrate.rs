@@ -7,13 +7,17 @@ use std::time::Instant;
 
 use lemi_core::bundle::{
     cell_file_name, read_cell_file, BakeParams, BundleError, CellCheck, CellEntry, CellFile,
-    CellStats, Manifest, SceneRef, BUNDLE_VERSION, MANIFEST_FORMAT,
+    CellStats, Manifest, ParamsError, SceneRef, BUNDLE_VERSION, MANIFEST_FORMAT,
 };
 use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
+use lemi_core::compress::CompressError;
 use lemi_core::container::write_atomic;
+use lemi_core::container::ContainerError;
+use lemi_core::layering::LayeringError;
+use lemi_gpu::cell_recorder::RecordError;
 use serde::{Deserialize, Serialize};
 
-/// Errors of the bake job; each names the file or parameter at fault.
+/// Errors of the bake job; each names the file, cell or parameter at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
     #[error(transparent)]
@@ -24,10 +28,55 @@ pub enum BakeError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{0}")]
-    Invalid(String),
-    #[error("cell {cell}: {message}")]
-    Cell { cell: CellId, message: String },
+    /// A bake parameter out of range ([`ParamsError::parameter`] names it).
+    #[error(transparent)]
+    Params(#[from] ParamsError),
+    #[error(transparent)]
+    Layering(#[from] LayeringError),
+    #[error(transparent)]
+    Record(Box<RecordError>),
+    #[error("{what}: {source}")]
+    Gpu {
+        what: &'static str,
+        #[source]
+        source: lemi_gpu::GpuError,
+    },
+    #[error("cell {cell}: compressing: {source}")]
+    Compress {
+        cell: CellId,
+        #[source]
+        source: CompressError,
+    },
+    /// Encoding a macro-texture or the cell file.
+    #[error("cell {cell}: {source}")]
+    Encode {
+        cell: CellId,
+        #[source]
+        source: ContainerError,
+    },
+    #[error("{}: {source}", path.display())]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{}: not a lemi shard record: {source}", path.display())]
+    NotAShardRecord {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{}: no shard records (*.json) to merge", dir.display())]
+    NoShardRecords { dir: PathBuf },
+    #[error("{} disagrees with {} (scene, parameters, cells or shard count differ)", path.display(), first.display())]
+    ShardsDisagree { path: PathBuf, first: PathBuf },
+    #[error("{}: shards {} have not been baked yet", dir.display(), missing.join(", "))]
+    ShardsMissing { dir: PathBuf, missing: Vec<String> },
+    #[error("cell {id} is in no shard record")]
+    CellInNoShard { id: CellId },
+    /// A shard's cell file is not the one its record lists.
+    #[error("{}: does not match its shard record (changed after baking): {}", source.path.display(), source.kind)]
+    ShardRecord { source: BundleError },
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BakeError + '_ {
@@ -142,9 +191,9 @@ pub fn run(
             let mut file = bake_cell(cell)?;
             file.header.params_hash = hash.clone();
             file.header.scene_fingerprint = job.scene.fingerprint.clone();
-            let bytes = file.encode().map_err(|e| BakeError::Cell {
+            let bytes = file.encode().map_err(|source| BakeError::Encode {
                 cell: cell.id(),
-                message: e.to_string(),
+                source,
             })?;
             let path = job.bundle.join(cell_file_name(cell.id()));
             write_atomic(&path, &bytes).map_err(io(&path))?;
@@ -191,8 +240,10 @@ pub fn run(
             let dir = job.bundle.join("shards");
             std::fs::create_dir_all(&dir).map_err(io(&dir))?;
             let path = dir.join(format!("{}-of-{}.json", s.k, s.n));
-            let json = serde_json::to_vec_pretty(&rec)
-                .map_err(|e| BakeError::Invalid(format!("{}: {e}", path.display())))?;
+            let json = serde_json::to_vec_pretty(&rec).map_err(|source| BakeError::Json {
+                path: path.clone(),
+                source,
+            })?;
             write_atomic(&path, &json).map_err(io(&path))?;
             path
         }
@@ -218,16 +269,15 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
             continue;
         }
         let bytes = std::fs::read(&p).map_err(io(&p))?;
-        let rec: ShardRecord = serde_json::from_slice(&bytes).map_err(|err| {
-            BakeError::Invalid(format!("{}: not a lemi shard record: {err}", p.display()))
-        })?;
+        let rec: ShardRecord =
+            serde_json::from_slice(&bytes).map_err(|source| BakeError::NotAShardRecord {
+                path: p.clone(),
+                source,
+            })?;
         records.push((p, rec));
     }
     let Some((first_path, first)) = records.first().cloned() else {
-        return Err(BakeError::Invalid(format!(
-            "{}: no shard records (*.json) to merge",
-            dir.display()
-        )));
+        return Err(BakeError::NoShardRecords { dir });
     };
     let n = first.shard.n;
     let mut seen = vec![false; n as usize];
@@ -238,11 +288,10 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
             && r.all_cells == first.all_cells
             && r.shard.n == n;
         if !same {
-            return Err(BakeError::Invalid(format!(
-                "{} disagrees with {} (scene, parameters, cells or shard count differ)",
-                p.display(),
-                first_path.display()
-            )));
+            return Err(BakeError::ShardsDisagree {
+                path: p.clone(),
+                first: first_path.clone(),
+            });
         }
         if let Some(s) = seen.get_mut(r.shard.k as usize) {
             *s = true;
@@ -255,11 +304,7 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
         .map(|(k, _)| format!("{k}/{n}"))
         .collect();
     if !missing.is_empty() {
-        return Err(BakeError::Invalid(format!(
-            "{}: shards {} have not been baked yet",
-            dir.display(),
-            missing.join(", ")
-        )));
+        return Err(BakeError::ShardsMissing { dir, missing });
     }
     let mut by_id = std::collections::HashMap::new();
     for (_, r) in &records {
@@ -269,9 +314,7 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
     }
     let mut cells = Vec::with_capacity(first.all_cells.len());
     for id in &first.all_cells {
-        let entry = by_id
-            .get(id)
-            .ok_or_else(|| BakeError::Invalid(format!("cell {id} is in no shard record")))?;
+        let entry = by_id.get(id).ok_or(BakeError::CellInNoShard { id: *id })?;
         let check = CellCheck {
             id: *id,
             entry: Some(entry),
@@ -279,7 +322,8 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
             scene_fingerprint: &first.scene.fingerprint,
             cell: None,
         };
-        read_cell_file(&bundle.join(&entry.file), &check)?;
+        read_cell_file(&bundle.join(&entry.file), &check)
+            .map_err(|source| BakeError::ShardRecord { source })?;
         cells.push(entry.clone());
     }
     let manifest = Manifest {

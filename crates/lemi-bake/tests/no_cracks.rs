@@ -1,4 +1,4 @@
-//! No cracks (DESIGN.md, "Crack-free recording"; TR-186-2-02-04 sec. 2.2): continuous surfaces
+//! No cracks (Jeschke & Wimmer, *An Error Metric for Layered Environment Map Impostors*, TR-186-2-02-04 sec. 2.2): continuous surfaces
 //! baked into many layers of one view cell, rendered through the impostor renderer from every
 //! corner and edge midpoint of the cell (and its centre), show no pixel where the reference sees
 //! the surface and the impostor sees background or a layer farther than the surface's slab.
@@ -45,17 +45,18 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{DQuat, DVec2, DVec3, IVec3};
-use lemi_bake::cell_bake::close_near_seam;
-use lemi_bake::clip_border::mark_clip_borders;
-use lemi_bake::{place_cell, Baker};
+use lemi_bake::Baker;
 use lemi_core::bundle::{BakeParams, LayerInfo, LayerTarget, Quad};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::ViewCell;
 use lemi_core::classify::{classify, TriRef, TriangleBounds};
 use lemi_core::clip::{clip_to_slab, ClipVertex};
+use lemi_core::clip_border::mark_clip_borders;
+use lemi_core::compress::close_near_seam;
 use lemi_core::compress::{
     compress_cell, CompressOptions, FaceLayers, LayerImage, MacroTexture, MicroTextureOptions,
 };
+use lemi_core::layering::place_cell;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{
@@ -422,7 +423,7 @@ enum Coverage {
 struct CopyOptions {
     coverage: Coverage,
     /// Grow the innermost layer by one texel over the texels that the near field's geometry
-    /// covers (`lemi_bake::cell_bake::close_near_seam`, as the baker does), closing the seam
+    /// covers (`lemi_core::compress::close_near_seam`, as the baker does), closing the seam
     /// between the near geometry and the innermost layer.
     near_gap_fill: bool,
 }

@@ -12,19 +12,19 @@
 //!   re-recorded depth images cover the baked texels (all of them for the equidistant layering,
 //!   which adds none by gap filling or near-seam closing);
 //! - the equidistant bake fills no gaps and records the triangles of the overlaps twice;
-//!   `validate_params` rejects a bad overlap by name.
+//!   `BakeParams::validate` rejects a bad overlap by name.
 //!
 //! Without an adapter the GPU tests fail with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
 
 use std::sync::Arc;
 
 use glam::{DVec3, IVec3};
-use lemi_bake::layering::{axis_of, farthest_along};
-use lemi_bake::{validate_params, Baker};
+use lemi_bake::Baker;
 use lemi_core::bundle::{BakeParams, CellFile, LayerTarget, Layering};
 use lemi_core::camera::Camera;
 use lemi_core::cell::ViewCell;
 use lemi_core::compress::{MacroPlacement, MacroTexture};
+use lemi_core::layering::{axis_of, farthest_along};
 use lemi_core::placement::{place_env_layers, EnvParams, Target};
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{
@@ -681,14 +681,17 @@ fn record_depths_matches_the_bake_for_every_layering() {
 #[test]
 fn a_bad_overlap_is_rejected_by_name() {
     for o in [-0.1, 1.5, f64::NAN, f64::INFINITY] {
-        let e = validate_params(&params(Layering::Equidistant { overlap: o }))
+        let e = params(Layering::Equidistant { overlap: o })
+            .validate()
             .expect_err("a bad overlap");
         assert!(e.to_string().contains("overlap"), "{e}");
     }
     for o in [0.0, 0.1, 1.0] {
-        validate_params(&params(Layering::Equidistant { overlap: o })).expect("a good overlap");
+        params(Layering::Equidistant { overlap: o })
+            .validate()
+            .expect("a good overlap");
     }
-    validate_params(&params(Layering::Single)).expect("single");
+    params(Layering::Single).validate().expect("single");
 }
 
 /// The equidistant placement in a scene that does not reach beyond the near field on some face
@@ -714,7 +717,7 @@ fn equidistant_falls_back_when_the_scene_ends_inside_the_near_field() {
     b.add_mesh(m);
     let scene = b.finish();
     let p = params(EQUIDISTANT);
-    let placements = lemi_bake::cell_bake::place_cell_in(&p, &cell(), &scene.bounds).unwrap();
+    let placements = lemi_core::layering::place_cell_in(&p, &cell(), &scene.bounds).unwrap();
     let nf = placements[0].near_field;
     for (f, pl) in p.faces.iter().zip(&placements) {
         let far = farthest_along(&scene.bounds, cell().center, *f);
@@ -725,6 +728,6 @@ fn equidistant_falls_back_when_the_scene_ends_inside_the_near_field() {
     assert_eq!(placements[0].layers[0].far_border, 300.0);
     assert_eq!(placements[1].layers[0].far_border, 2.0 * nf);
     // without the scene's bounds the equidistant layering cannot be placed
-    let e = lemi_bake::place_cell(&p, &cell()).expect_err("needs bounds");
+    let e = lemi_core::layering::place_cell(&p, &cell()).expect_err("needs bounds");
     assert!(e.to_string().contains("bounds"), "{e}");
 }

@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_bake::{BakeJob, Baker, CellOutcome};
-use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, Layering, SceneRef};
+use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, Layering, ParamsError, SceneRef};
 use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
 use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
 use lemi_core::{Aabb, Face};
@@ -116,6 +116,22 @@ const DEFAULT_OVERLAP: f64 = 0.1;
 const BAKED_STRATEGIES: [&str; 3] = ["lemi", "cubemap", "equidistant"];
 
 /// The layering of `--strategy NAME` (with `--overlap`), or a clear error.
+/// The flag that sets the parameter a [`ParamsError`] is about.
+fn flag_of(e: &ParamsError) -> &'static str {
+    match e {
+        ParamsError::CellSize(_) => "--cell-size",
+        ParamsError::CellHeight(_) => "--cell-height",
+        ParamsError::Resolution(_) => "--resolution",
+        ParamsError::NoFaces => "--faces",
+        ParamsError::Alpha(_) => "--alpha-deg/--output-fov",
+        ParamsError::Layers(_) => "--layers",
+        ParamsError::NearField { .. } => "--near-field",
+        ParamsError::MicroGrid { .. } => "--micro-grid",
+        ParamsError::MicroThreshold(_) => "--micro-threshold",
+        ParamsError::Overlap(_) => "--overlap",
+    }
+}
+
 fn layering_of(name: &str, overlap: Option<f64>) -> Result<Layering> {
     let name = name.trim();
     let layering = match name {
@@ -256,12 +272,6 @@ pub fn run(args: Args) -> Result<()> {
         6 => Face::ALL.to_vec(),
         n => bail!("--faces must be 4 (horizontal) or 6 (all), got {n}"),
     };
-    if !(args.cell_size.is_finite() && args.cell_size > 0.0) {
-        bail!(
-            "--cell-size must be a positive number of metres (got {})",
-            args.cell_size
-        );
-    }
     let target = match (args.layers, args.near_field) {
         (_, Some(d)) => LayerTarget::NearField(d),
         (Some(n), None) => LayerTarget::Layers(n),
@@ -285,11 +295,6 @@ pub fn run(args: Args) -> Result<()> {
             (a, Some(fov), Some(width))
         }
     };
-    if let Some(h) = args.cell_height {
-        if !(h.is_finite() && h > 0.0) {
-            bail!("--cell-height must be a positive number of metres (got {h})");
-        }
-    }
     let params = BakeParams {
         cell_size: args.cell_size,
         cell_height: args.cell_height,
@@ -303,7 +308,9 @@ pub fn run(args: Args) -> Result<()> {
         micro_threshold: args.micro_threshold,
         layering,
     };
-    lemi_bake::validate_params(&params)?;
+    params
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", flag_of(&e)))?;
     let mut warnings = Vec::new();
     if let (Some(f), Some(w)) = (fov, width) {
         if let Ok(min) = min_face_res_for_output_view(f.to_radians(), w) {

@@ -11,8 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use lemi_eval::{EvalOptions, ViewpointSet};
 use std::sync::Arc;
 
+use lemi_eval::StrategyCells;
 use lemi_gpu::{BackendChoice, Gpu, GpuMaterials, RenderOptions};
-use lemi_strategy::eval::StrategyCells;
 use lemi_strategy::StrategyContext;
 
 /// Measure how far the impostor images of a bundle are from the real geometry.

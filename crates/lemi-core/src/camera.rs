@@ -9,7 +9,7 @@
 //! sec. 3: every layer of a face uses the same projection from the reference viewpoint).
 //!
 //! # Conventions
-//! - World: metres, right-handed, +Y up (DESIGN.md).
+//! - World: metres, right-handed, +Y up (glTF 2.0's convention).
 //! - View space: right-handed, the camera looks along −Z, +X is right, +Y is up.
 //! - Clip space as wgpu/WebGPU/Vulkan/D3D: NDC x, y ∈ [−1, 1] with +y up, depth z ∈ [0, 1].
 //! - **Reverse-Z, infinite far plane**: a point at view-space depth `d` (distance along the view axis,

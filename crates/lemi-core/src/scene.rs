@@ -1,7 +1,7 @@
 //! The in-memory scene every stage works on: triangle meshes grouped by material, materials with a
 //! base colour factor and an optional base colour texture, bounds and import statistics.
 //!
-//! Conventions (DESIGN.md): metres, right-handed, +Y up. Importers convert other up axes with
+//! Conventions: metres, right-handed, +Y up. Importers convert other up axes with
 //! [`UpAxis::to_y_up`] before adding geometry, so every later stage can rely on +Y up.
 //!
 //! Validation happens once, in [`SceneBuilder::add_mesh`]: triangles with a non-finite vertex and

@@ -19,6 +19,7 @@ pub mod image_metrics;
 pub mod report;
 pub mod run;
 pub mod stats;
+pub mod strategy_cells;
 
 pub use evaluate::{evaluate_view, ViewEval};
 pub use image_metrics::{
@@ -35,6 +36,7 @@ pub use run::{
     ViewpointSet,
 };
 pub use stats::{Histogram, PixelErrorStats};
+pub use strategy_cells::StrategyCells;
 
 /// Everything that can go wrong while evaluating or writing a report.
 #[derive(Debug, thiserror::Error)]

@@ -9,15 +9,14 @@
 use std::sync::Arc;
 
 use glam::DVec3;
-use lemi_bake::Baker;
 use lemi_core::bundle::{Bundle, CellFile, Manifest};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::{eval_directions, eval_viewpoints, CellId, ViewCell};
 use lemi_core::parallax_error::{pixel_errors, LayerDepths};
 use lemi_core::Scene;
 use lemi_gpu::{
-    Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions, Renderer,
-    UploadOptions,
+    CellRecorder, Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
+    RenderOptions, Renderer, UploadOptions,
 };
 
 use crate::report::{BundleResult, CellResult, WorstSet, WorstView};
@@ -181,7 +180,7 @@ struct LayeredCells<'a> {
     scene: &'a Scene,
     materials: Arc<GpuMaterials>,
     renderer: ImpostorRenderer,
-    baker: Baker<'a>,
+    recorder: CellRecorder<'a>,
     render_options: RenderOptions,
     current: Option<(ViewCell, CellFile, ImpostorCell, LayerDepths)>,
 }
@@ -205,7 +204,7 @@ impl CellRenderer for LayeredCells<'_> {
         )
         .map_err(gpu_err(format!("uploading cell {id}")))?;
         let depths = self
-            .baker
+            .recorder
             .record_depths(cell)
             .map_err(|e| err(format!("cell {id}: {e}")))?;
         self.current = Some((*cell, file, gpu_cell, depths));
@@ -255,7 +254,7 @@ pub fn evaluate_bundle(
         scene,
         materials,
         renderer: ImpostorRenderer::new(gpu).map_err(|e| err(format!("impostor renderer: {e}")))?,
-        baker: Baker::new(gpu, scene, manifest.params.clone())
+        recorder: CellRecorder::new(gpu, scene, manifest.params.clone())
             .map_err(|e| err(format!("preparing to re-record depths: {e}")))?,
         render_options: RenderOptions {
             clear: options.clear,

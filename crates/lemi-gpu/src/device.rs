@@ -1,7 +1,7 @@
 //! Device setup: finds an adapter (a real GPU, or Mesa's lavapipe/llvmpipe software rasterizers),
 //! honouring `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` / `WGPU_POWER_PREF`, and opens a device with the
 //! adapter's own limits so that large buffers are allowed. With no adapter, one clear error says what
-//! to install (DESIGN.md, "Rendering: wgpu").
+//! to install.
 
 use std::fmt;
 

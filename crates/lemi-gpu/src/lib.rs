@@ -1,4 +1,4 @@
-//! lemi-gpu: everything that talks to the GPU through wgpu (DESIGN.md, "Rendering: wgpu").
+//! lemi-gpu: everything that talks to the GPU through wgpu (one renderer for bake, view and eval).
 //!
 //! - [`Gpu`]: adapter and device setup (any wgpu backend; Mesa's lavapipe/llvmpipe without a GPU).
 //! - [`shading`]: the one shading model (WGSL module + CPU mirror) every pipeline shares.
@@ -6,6 +6,8 @@
 //! - [`Renderer`]: the reference renderer, the ground truth impostors are compared with.
 //! - [`ImpostorRenderer`]: the runtime view of one baked cell ([`ImpostorCell`]): near geometry
 //!   plus the layered impostor quads.
+//! - [`LayerRecorder`] and [`CellRecorder`]: the crack-free recording of a cell's layers (what the
+//!   bake compresses and the certificate measures depths with).
 //!
 //! ```no_run
 //! use lemi_core::camera::Camera;
@@ -21,6 +23,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod cell_recorder;
 mod device;
 pub mod impostor;
 pub mod recorder;
@@ -31,6 +34,7 @@ mod surface;
 mod targets;
 pub mod texture;
 
+pub use cell_recorder::{CellRecorder, RecordError, Recording};
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
 pub use impostor::{
     ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, QUAD_ALPHA_CUTOFF,

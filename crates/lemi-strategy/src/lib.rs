@@ -18,7 +18,6 @@
 //! `dynamic` use a `lemi` bundle for its grid and near lists and build their far field themselves.
 
 pub mod dynamic;
-pub mod eval;
 pub mod layered;
 pub mod warp;
 

@@ -1,5 +1,5 @@
-//! The `warp` strategy: depth-image warping of the far field, after the terrain-impostors report
-//! (`papers/terrain-impostors-image-warping.txt`).
+//! The `warp` strategy: depth-image warping of the far field, after a terrain-impostors report
+//! ("Pre-recording Images" and "Warping Images", its sec. 2 and 3).
 //!
 //! # Recording ("pre-recording images", report sec. 2 and 5)
 //! A cell's far field is recorded on the first frame that needs it (or by [`Strategy::preload`]):

@@ -14,7 +14,9 @@ use crate::compress::MacroTexture;
 use crate::container::{self, Blob, ContainerError};
 use crate::Face;
 
+mod params;
 mod reader;
+pub use params::{ParamsError, MAX_LAYERS, MAX_RESOLUTION, MIN_RESOLUTION};
 pub use reader::{read_cell_file, Bundle, CellCheck, VerifiedCell};
 
 /// Version of the manifest and cell files. Readers reject any other version.
@@ -251,7 +253,7 @@ impl BundleError {
 /// What is wrong with a bundle file. The messages say what to do where something can be done.
 #[derive(Debug, thiserror::Error)]
 pub enum BundleErrorKind {
-    #[error("{0}")]
+    #[error("cannot read or write it: {0}")]
     Io(#[source] std::io::Error),
     /// Truncated, a checksum that does not match, another version, a malformed header or blob.
     #[error("{0}")]
@@ -261,7 +263,7 @@ pub enum BundleErrorKind {
     Invalid(String),
     /// The cell is not listed in the manifest (`path` is the bundle directory).
     #[error(
-        "cell {id} was not baked into this bundle; baked cells: {}",
+        "cell {id} is not in the bundle's manifest (it was not baked); baked cells: {}",
         list_ids(baked)
     )]
     NotBaked { id: CellId, baked: Vec<CellId> },

@@ -100,8 +100,8 @@ pub struct Bundle {
 }
 
 impl Bundle {
-    /// Reads and checks the manifest of the bundle directory `dir` (format, version, and that its
-    /// parameters hash is the hash of its parameters).
+    /// Reads and checks the manifest of the bundle directory `dir` (format, version, parameters in
+    /// range, and that its parameters hash is the hash of its parameters).
     pub fn open(dir: &Path) -> Result<Bundle, BundleError> {
         Bundle::from_manifest(dir, Manifest::read(dir)?)
     }
@@ -109,6 +109,12 @@ impl Bundle {
     /// A bundle over a manifest already read (or built) for `dir`, with the same checks as
     /// [`Bundle::open`].
     pub fn from_manifest(dir: &Path, manifest: Manifest) -> Result<Bundle, BundleError> {
+        if let Err(e) = manifest.params.validate() {
+            return Err(BundleError::invalid(
+                super::manifest_path(dir),
+                format!("params.{}: {e}", e.parameter()),
+            ));
+        }
         let hash = manifest.params.hash();
         if manifest.params_hash != hash {
             return Err(BundleError::invalid(

@@ -131,3 +131,30 @@ pub fn fill_gaps(layers: &mut [LayerImage]) -> Result<GapFillStats, CompressErro
         });
     Ok(total)
 }
+
+/// Closes the seam between the near geometry and the innermost layer: the near geometry is drawn
+/// exactly, the innermost layer with up to α of parallax, so a surface crossing the near-field
+/// border can open a gap of up to a pixel between them (found by the no-crack test). Gap filling
+/// (GI 2002 sec. 5.1) closes such gaps between two layers; here the near field plays the closer
+/// layer: every transparent texel of the innermost layer that touches one of its opaque texels
+/// (8-neighbourhood) and where the near geometry just inside the border (recorded into `near`, the
+/// same face projection) is opaque takes the near geometry's colour. The added texels are flagged
+/// as clip-border texels, so they never hide farther layers. Returns the number of texels added.
+pub fn close_near_seam(inner: &mut LayerImage, near: &[u8]) -> u64 {
+    let res = inner.res as usize;
+    if near.len() != inner.rgba.len() {
+        return 0;
+    }
+    let opaque = inner.opaque_mask();
+    let touches = super::layer_image::any3x3(&opaque, inner.res, false);
+    let mut added = 0;
+    for i in 0..res * res {
+        if !opaque[i] && touches[i] && near[4 * i + 3] >= 128 {
+            let c = [near[4 * i], near[4 * i + 1], near[4 * i + 2], 255];
+            inner.set_texel(i, c);
+            inner.border[i] = true;
+            added += 1;
+        }
+    }
+    added
+}

@@ -21,7 +21,7 @@ pub mod micro_textures;
 
 use rayon::prelude::*;
 
-pub use gap_fill::{fill_gaps, GapFillStats};
+pub use gap_fill::{close_near_seam, fill_gaps, GapFillStats};
 pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{

@@ -1,8 +1,8 @@
 //! Layer placement: the error metric that decides where every impostor layer and border goes.
 //!
 //! This work is based on: S. Jeschke, M. Wimmer et al., *Layered Environment-Map Impostors for
-//! Arbitrary Scenes*, Graphics Interface 2002, sec. 4.2-4.3 (eqs. 1-2, restored in
-//! `papers/README.md`), and S. Jeschke, M. Wimmer, *An Error Metric for Layered Environment Map
+//! Arbitrary Scenes*, Graphics Interface 2002, sec. 4.2-4.3 (eqs. 1-2; the published
+//! text garbles them, the forms used here are re-derived and checked by brute force), and S. Jeschke, M. Wimmer, *An Error Metric for Layered Environment Map
 //! Impostors*, TR-186-2-02-04, sec. 2.1 (eqs. 1-7). The object (single impostor) case of the TR
 //! lives in [`object`]; the output-view helpers (α, texture resolution) in [`view`].
 //!

@@ -69,7 +69,7 @@ pub fn alpha_from_output_view(
 /// The smallest face resolution `Res` whose central texel (the largest texel of a 90° face,
 /// `2·atan(1/Res)`) subtends no more than the central output pixel: `Res ≥ width / tan(fov/2)`.
 /// Below it, layer texels are magnified on screen and the one-pixel guarantee is only nominal.
-/// (The DESIGN glossary's `width · 90°/fov` is the small-angle form of the same rule.)
+/// (The rule of thumb `width · 90°/fov` is the small-angle form of the same rule.)
 pub fn min_face_res_for_output_view(fov: f64, width: u32) -> Result<u32, PlacementError> {
     check_view(fov, width)?;
     let r = (f64::from(width) / (fov / 2.0).tan() - 1e-9).ceil();

@@ -2,7 +2,7 @@
 //! built-in specs, composed into one [`Scene`] through [`SceneBuilder`].
 //!
 //! Based on the file format specifications (Khronos glTF 2.0; Wavefront OBJ/MTL; Turk's PLY
-//! polygon file format) and DESIGN.md's conventions: every reader converts the input's up axis
+//! polygon file format) and lemi's conventions (metres, right-handed, +Y up): every reader converts the input's up axis
 //! with [`lemi_core::UpAxis::to_y_up`] before handing geometry to [`SceneBuilder::add_mesh`], which
 //! validates triangles (non-finite, degenerate, bad index: dropped and counted) and fills in flat
 //! normals where a file has none (readers pass zero normals then).

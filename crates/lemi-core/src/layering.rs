@@ -1,7 +1,7 @@
 //! Where the layers of a cell go and what each records, per [`Layering`] (the far-field strategy of
 //! a layered bundle, `BakeParams::layering`):
 //!
-//! - [`Layering::Optimal`] (lemi): `lemi_core::placement::place_env_layers` for `params.target`
+//! - [`Layering::Optimal`] (lemi): [`place_env_layers`] for `params.target`
 //!   (GI 2002 sec. 4, TR-186-2-02-04 sec. 2.1); each layer records its slab between its borders.
 //! - [`Layering::Single`] (a conventional cube environment map): one layer per face, placed as the
 //!   optimal placement places one layer (`Target::Layers(1)`, whatever `params.target` says), so the
@@ -23,14 +23,31 @@
 //! what each layer records is its [`Slabs`] range. For the optimal and single layerings the two
 //! coincide (`Slabs::from_borders`).
 
+use crate::bundle::{BakeParams, LayerTarget, Layering};
+use crate::cell::{CellId, ViewCell};
+use crate::classify::Slabs;
+use crate::placement::{
+    place_env_layers, Axis, Bound, EnvParams, Layer, Placement, PlacementError, Target,
+};
+use crate::{Aabb, Face};
 use glam::DVec3;
-use lemi_core::bundle::{BakeParams, LayerTarget, Layering};
-use lemi_core::cell::ViewCell;
-use lemi_core::classify::Slabs;
-use lemi_core::placement::{place_env_layers, Axis, Bound, EnvParams, Layer, Placement, Target};
-use lemi_core::{Aabb, Face};
 
-use crate::BakeError;
+/// Why the layers of a cell cannot be planned.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum LayeringError {
+    #[error("cell {cell}: placing the layers of face {face}: {source}")]
+    Placement {
+        cell: CellId,
+        face: Face,
+        #[source]
+        source: PlacementError,
+    },
+    #[error(
+        "cell {cell}: the equidistant layering spaces its layers up to the farthest scene point: \
+         placing them needs the scene's bounds"
+    )]
+    NeedsSceneBounds { cell: CellId },
+}
 
 /// The layers of one face and the depth range each records (same order, far to near).
 #[derive(Clone, Debug, PartialEq)]
@@ -57,7 +74,7 @@ impl CellPlan {
         self.faces.iter().map(|f| f.placement.clone()).collect()
     }
 
-    /// The recorded slabs, one list per face (for `lemi_core::classify::classify_slabs`).
+    /// The recorded slabs, one list per face (for [`crate::classify::classify_slabs`]).
     pub fn slabs(&self) -> Vec<Slabs> {
         self.faces.iter().map(|f| f.slabs.clone()).collect()
     }
@@ -189,16 +206,17 @@ fn optimal_placements(
     params: &BakeParams,
     cell: &ViewCell,
     target: Target,
-) -> Result<Vec<Placement>, BakeError> {
+) -> Result<Vec<Placement>, LayeringError> {
     params
         .faces
         .iter()
         .map(|&face| {
             let env =
                 EnvParams::box_face(cell.half, axis_of(face), params.resolution, params.alpha);
-            place_env_layers(&env, target).map_err(|e| BakeError::Cell {
+            place_env_layers(&env, target).map_err(|source| LayeringError::Placement {
                 cell: cell.id(),
-                message: format!("placing the layers of face {face}: {e}"),
+                face,
+                source,
             })
         })
         .collect()
@@ -211,7 +229,7 @@ pub fn plan_cell(
     params: &BakeParams,
     cell: &ViewCell,
     scene_bounds: Option<&Aabb>,
-) -> Result<CellPlan, BakeError> {
+) -> Result<CellPlan, LayeringError> {
     let target = match (params.layering, params.target) {
         (Layering::Single, _) => Target::Layers(1),
         (_, LayerTarget::Layers(n)) => Target::Layers(n as usize),
@@ -231,12 +249,7 @@ pub fn plan_cell(
             .collect(),
         Layering::Equidistant { overlap } => {
             let Some(bounds) = scene_bounds else {
-                return Err(BakeError::Cell {
-                    cell: cell.id(),
-                    message: "the equidistant layering spaces its layers up to the farthest \
-                              scene point: placing them needs the scene's bounds"
-                        .into(),
-                });
+                return Err(LayeringError::NeedsSceneBounds { cell: cell.id() });
             };
             params
                 .faces
@@ -259,6 +272,22 @@ pub fn plan_cell(
         .map(|f| f.placement.near_field)
         .fold(0.0f64, f64::max);
     Ok(CellPlan { faces, near_field })
+}
+
+/// The placement of every baked face of `cell`, for `params.layering`. The equidistant layering
+/// needs the scene's bounds: use [`place_cell_in`] (this is an error for it).
+pub fn place_cell(params: &BakeParams, cell: &ViewCell) -> Result<Vec<Placement>, LayeringError> {
+    Ok(plan_cell(params, cell, None)?.placements())
+}
+
+/// [`place_cell`] for a scene with bounding box `scene_bounds` (what the bake places, for every
+/// layering).
+pub fn place_cell_in(
+    params: &BakeParams,
+    cell: &ViewCell,
+    scene_bounds: &Aabb,
+) -> Result<Vec<Placement>, LayeringError> {
+    Ok(plan_cell(params, cell, Some(scene_bounds))?.placements())
 }
 
 #[cfg(test)]

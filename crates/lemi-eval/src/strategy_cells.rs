@@ -1,19 +1,19 @@
 //! Evaluating any strategy with `lemi eval`'s viewpoints and metrics: [`StrategyCells`] adapts a
-//! [`Strategy`] to [`lemi_eval::CellRenderer`].
+//! [`Strategy`] to [`crate::CellRenderer`].
 //!
-//! Layered bundles are evaluated by [`lemi_eval::evaluate_bundle`], which re-records the layers'
+//! Layered bundles are evaluated by [`crate::evaluate_bundle`], which re-records the layers'
 //! depths to measure the error of every impostor texel and judges cracks against one slab. The
-//! other strategies measure their own per-pixel error ([`crate::FrameRequest::measure_error`]);
+//! other strategies measure their own per-pixel error ([`lemi_strategy::FrameRequest::measure_error`]);
 //! their cracks are the pixels that show background where the reference shows a surface (they
 //! have no slabs to bound a see-through depth by).
 
 use glam::DVec3;
 use lemi_core::camera::View;
 use lemi_core::cell::ViewCell;
-use lemi_eval::{CellRenderer, EvalError, RenderedView};
 use lemi_gpu::RenderOptions;
+use lemi_strategy::{FrameRequest, Strategy};
 
-use crate::{FrameRequest, Strategy};
+use crate::{CellRenderer, EvalError, RenderedView};
 
 /// A strategy as the evaluation's renderer: every view is one frame with the error measured.
 pub struct StrategyCells<'a> {

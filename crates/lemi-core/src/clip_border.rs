@@ -4,14 +4,14 @@
 //! border is cut there and both adjacent layers record their part; the texels along the cut are
 //! only partly covered by each part, so they must not hide anything behind them (hidden-texel
 //! removal, GI 2002 sec. 5.2, treats them as non-occluding; see
-//! `lemi_core::compress::hidden_texels`). The cut edges lie on a border plane (constant depth along
+//! [`crate::compress::hidden_texels`]). The cut edges lie on a border plane (constant depth along
 //! the face axis), so they project to straight segments of the face image; every texel a segment
 //! passes through is found exactly by a grid traversal (Amanatides & Woo, "A Fast Voxel Traversal
 //! Algorithm for Ray Tracing", Eurographics 1987), in 2D.
 
+use crate::clip::ClipVertex;
+use crate::Face;
 use glam::DVec2;
-use lemi_core::clip::ClipVertex;
-use lemi_core::Face;
 
 /// Marks in `mask` (`res × res`, row-major, row 0 at the top) every texel touched by an edge of the
 /// clipped triangles `tris` (three vertices each, relative to the reference viewpoint) that lies on
