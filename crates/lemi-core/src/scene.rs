@@ -7,10 +7,15 @@
 //! Validation happens once, in [`SceneBuilder::add_mesh`]: triangles with a non-finite vertex and
 //! degenerate triangles (exactly zero area: repeated or collinear vertices, *not* merely small ones)
 //! are dropped and counted, never fatal.
+//!
+//! [`Scene::extract`] copies a list of triangles ([`TriRef`]s, such as a cell's near list) out of
+//! the scene as meshes of their own.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
+
+use crate::classify::TriRef;
 
 /// One vertex as the GPU consumes it (36 bytes).
 #[repr(C)]
@@ -173,6 +178,113 @@ impl Default for Aabb {
 impl Scene {
     pub fn triangle_count(&self) -> u64 {
         self.meshes.iter().map(|m| m.triangle_count() as u64).sum()
+    }
+
+    /// Copies the triangles `tris` out of the scene: one mesh per referenced source mesh, in
+    /// ascending source-mesh order, each with its source's material, only the vertices its
+    /// triangles use (re-indexed in order of first use) and its triangles in list order. A
+    /// reference past the meshes or past its mesh's triangles is an [`ExtractError`] naming the
+    /// first such entry (every entry is checked before anything is copied); a triangle whose vertex
+    /// indices are out of range is skipped (a [`SceneBuilder`] scene has none), and a mesh left
+    /// without triangles is left out. Duplicate references copy a triangle twice.
+    pub fn extract(&self, tris: &[TriRef]) -> Result<Vec<Mesh>, ExtractError> {
+        for (entry, &TriRef { mesh: m, tri: t }) in tris.iter().enumerate() {
+            let Some(mesh) = self.meshes.get(m as usize) else {
+                return Err(ExtractError::NoMesh {
+                    entry,
+                    mesh: m,
+                    tri: t,
+                    meshes: self.meshes.len(),
+                });
+            };
+            if t as usize >= mesh.triangle_count() {
+                return Err(ExtractError::NoTriangle {
+                    entry,
+                    mesh: m,
+                    tri: t,
+                    triangles: mesh.triangle_count(),
+                });
+            }
+        }
+        let mut order: Vec<TriRef> = tris.to_vec();
+        order.sort_by_key(|r| r.mesh); // stable: list order within a mesh
+        let mut out = Vec::new();
+        let mut remap: Vec<u32> = Vec::new();
+        for group in order.chunk_by(|a, b| a.mesh == b.mesh) {
+            let Some(src) = group.first().and_then(|r| self.meshes.get(r.mesh as usize)) else {
+                continue;
+            };
+            remap.clear();
+            remap.resize(src.vertices.len(), u32::MAX);
+            let mut mesh = Mesh {
+                material: src.material,
+                vertices: Vec::new(),
+                indices: Vec::with_capacity(group.len() * 3),
+            };
+            for r in group {
+                let t = r.tri as usize;
+                let Some(tri) = src.indices.get(3 * t..3 * t + 3) else {
+                    continue;
+                };
+                if tri.iter().any(|&i| i as usize >= src.vertices.len()) {
+                    continue;
+                }
+                for &i in tri {
+                    let i = i as usize;
+                    if remap[i] == u32::MAX {
+                        remap[i] = mesh.vertices.len() as u32;
+                        mesh.vertices.push(src.vertices[i]);
+                    }
+                    mesh.indices.push(remap[i]);
+                }
+            }
+            if !mesh.indices.is_empty() {
+                out.push(mesh);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A triangle reference [`Scene::extract`] cannot resolve. `entry` is its position in the list;
+/// the messages call the list a near list, as a cell file stores one
+/// ([`crate::bundle::CellFile::near`]).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ExtractError {
+    /// `mesh` is not below `meshes`, the scene's mesh count.
+    #[error(
+        "near list entry {entry} (mesh {mesh}, triangle {tri}) names a mesh past the scene's \
+         {meshes} meshes"
+    )]
+    NoMesh {
+        entry: usize,
+        mesh: u32,
+        tri: u32,
+        meshes: usize,
+    },
+    /// `tri` is not below `triangles`, the triangle count of mesh `mesh`.
+    #[error(
+        "near list entry {entry} (mesh {mesh}, triangle {tri}) names a triangle past mesh \
+         {mesh}'s {triangles} triangles"
+    )]
+    NoTriangle {
+        entry: usize,
+        mesh: u32,
+        tri: u32,
+        triangles: usize,
+    },
+}
+
+/// `[mesh, tri]`, the form a cell file stores its near list in.
+impl From<[u32; 2]> for TriRef {
+    fn from([mesh, tri]: [u32; 2]) -> TriRef {
+        TriRef { mesh, tri }
+    }
+}
+
+impl From<TriRef> for [u32; 2] {
+    fn from(r: TriRef) -> [u32; 2] {
+        [r.mesh, r.tri]
     }
 }
 
@@ -374,6 +486,146 @@ mod tests {
         assert_eq!(s.meshes[0].vertices[0].normal, [0.0, 0.0, 1.0]);
         assert_eq!(s.bounds.min, DVec3::ZERO);
         assert_eq!(s.bounds.max, DVec3::new(1.0, 1.0, 0.0));
+    }
+
+    /// Three meshes (materials 7, 8, 9) of `n` triangles each, every vertex at a distinct
+    /// position, vertices shared between neighbouring triangles.
+    fn strip_scene(n: u32) -> Scene {
+        let meshes = (0..3u32)
+            .map(|m| Mesh {
+                material: 7 + m,
+                vertices: (0..n + 2)
+                    .map(|k| v([k as f32, m as f32, (k % 2) as f32]))
+                    .collect(),
+                indices: (0..n).flat_map(|t| [t, t + 1, t + 2]).collect(),
+            })
+            .collect();
+        Scene {
+            meshes,
+            ..Scene::default()
+        }
+    }
+
+    fn positions(mesh: &Mesh) -> Vec<[[f32; 3]; 3]> {
+        mesh.indices
+            .chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|k| mesh.vertices[t[k] as usize].position))
+            .collect()
+    }
+
+    #[test]
+    fn extract_copies_the_listed_triangles_per_mesh() {
+        let scene = strip_scene(4);
+        let r = |mesh, tri| TriRef { mesh, tri };
+        let out = scene
+            .extract(&[r(2, 3), r(0, 1), r(2, 0), r(0, 2), r(0, 1)])
+            .expect("valid list");
+        assert_eq!(out.len(), 2);
+        // ascending source-mesh order, the source's material
+        assert_eq!((out[0].material, out[1].material), (7, 9));
+        // list order within a mesh, vertices re-indexed in order of first use, shared ones once
+        assert_eq!(out[0].indices, [0, 1, 2, 1, 2, 3, 0, 1, 2]);
+        assert_eq!(out[0].vertices.len(), 4);
+        assert_eq!(out[1].indices, [0, 1, 2, 3, 4, 5]);
+        let src = &scene.meshes;
+        let src2 = positions(&src[2]);
+        assert_eq!(positions(&out[1]), [src2[3], src2[0]]);
+        assert_eq!(out[0].vertices[0], src[0].vertices[1]);
+        assert!(scene.extract(&[]).expect("empty list").is_empty());
+    }
+
+    #[test]
+    fn extract_skips_triangles_with_bad_vertex_indices() {
+        let mut scene = strip_scene(2);
+        scene.meshes[1].indices[3..6].copy_from_slice(&[0, 1, 99]);
+        let r = |mesh, tri| TriRef { mesh, tri };
+        let out = scene.extract(&[r(1, 1), r(1, 0)]).expect("in range");
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].indices, [0, 1, 2]);
+        // a mesh whose listed triangles are all skipped is left out
+        assert!(scene.extract(&[r(1, 1)]).expect("in range").is_empty());
+    }
+
+    #[test]
+    fn extract_names_the_first_bad_entry() {
+        let scene = strip_scene(4);
+        let r = |mesh, tri| TriRef { mesh, tri };
+        assert_eq!(
+            scene.extract(&[r(0, 0), r(3, 1), r(0, 9)]).err(),
+            Some(ExtractError::NoMesh {
+                entry: 1,
+                mesh: 3,
+                tri: 1,
+                meshes: 3
+            })
+        );
+        let e = scene.extract(&[r(1, 4)]).expect_err("past the triangles");
+        assert_eq!(
+            e,
+            ExtractError::NoTriangle {
+                entry: 0,
+                mesh: 1,
+                tri: 4,
+                triangles: 4
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "near list entry 0 (mesh 1, triangle 4) names a triangle past mesh 1's 4 triangles"
+        );
+        let e = scene
+            .extract(&[r(u32::MAX, u32::MAX)])
+            .expect_err("past the meshes");
+        assert_eq!(
+            e.to_string(),
+            "near list entry 0 (mesh 4294967295, triangle 4294967295) names a mesh past the \
+             scene's 3 meshes"
+        );
+        assert!(Scene::default().extract(&[r(0, 0)]).is_err());
+    }
+
+    #[test]
+    fn tri_refs_convert_to_and_from_pairs() {
+        let r = TriRef { mesh: 5, tri: 9 };
+        assert_eq!(<[u32; 2]>::from(r), [5, 9]);
+        assert_eq!(TriRef::from([5, 9]), r);
+    }
+
+    proptest::proptest! {
+        /// The extracted triangles are exactly the listed ones, grouped by ascending source mesh
+        /// and in list order within one, with identical vertex positions; no vertex is unused.
+        #[test]
+        fn extract_yields_exactly_the_listed_triangles(
+            n in 1u32..12,
+            list in proptest::collection::vec((0u32..3, 0u32..64), 0..40),
+        ) {
+            let scene = strip_scene(n);
+            let refs: Vec<TriRef> =
+                list.iter().map(|&(mesh, t)| TriRef { mesh, tri: t % n }).collect();
+            let out = scene.extract(&refs).expect("valid list");
+            let mut want: Vec<(u32, [[f32; 3]; 3])> = refs
+                .iter()
+                .map(|r| {
+                    let src = &scene.meshes[r.mesh as usize];
+                    let t = 3 * r.tri as usize;
+                    let tri = [0, 1, 2].map(|k| src.vertices[src.indices[t + k] as usize].position);
+                    (src.material, tri)
+                })
+                .collect();
+            want.sort_by_key(|w| w.0);
+            let got: Vec<(u32, [[f32; 3]; 3])> = out
+                .iter()
+                .flat_map(|m| positions(m).into_iter().map(move |t| (m.material, t)))
+                .collect();
+            proptest::prop_assert_eq!(got, want);
+            for m in &out {
+                let mut used = vec![false; m.vertices.len()];
+                for &i in &m.indices {
+                    used[i as usize] = true;
+                }
+                proptest::prop_assert!(used.iter().all(|&u| u));
+            }
+        }
     }
 
     #[test]

@@ -24,6 +24,10 @@ pub enum GpuError {
     /// Invalid input data (bad texture size, material index out of range, bad lighting, …).
     #[error("{0}")]
     Invalid(String),
+    /// A near list entry naming a mesh or triangle the scene does not have (the message is the
+    /// [`ExtractError`](lemi_core::scene::ExtractError)'s).
+    #[error(transparent)]
+    Extract(#[from] lemi_core::scene::ExtractError),
     #[error("reading the rendered image back failed: {0}")]
     Readback(String),
 }

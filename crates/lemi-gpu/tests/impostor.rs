@@ -484,10 +484,20 @@ fn bad_input_is_an_error() {
         Err(e) => panic!("expected Invalid containing {needle}, got {e}"),
         Ok(_) => panic!("expected Invalid containing {needle}, got Ok"),
     };
+    // the near list's errors are the scene's typed extraction errors, with the same messages
+    let bad_near = |r: Result<ImpostorCell, GpuError>, needle: &str| match r {
+        Err(GpuError::Extract(e)) => {
+            let msg = e.to_string();
+            assert!(msg.contains(needle), "{msg} lacks {needle}");
+            assert_eq!(GpuError::Extract(e).to_string(), msg);
+        }
+        Err(e) => panic!("expected a near list error containing {needle}, got {e}"),
+        Ok(_) => panic!("expected a near list error containing {needle}, got Ok"),
+    };
     let ms = std::slice::from_ref(&m);
-    invalid(upload(&[[0, 0], [2, 0]], &[], &[]), "mesh 2, triangle 0");
-    invalid(upload(&[[1, 1]], &[], &[]), "mesh 1, triangle 1");
-    invalid(upload(&[[u32::MAX, u32::MAX]], &[], &[]), "4294967295");
+    bad_near(upload(&[[0, 0], [2, 0]], &[], &[]), "mesh 2, triangle 0");
+    bad_near(upload(&[[1, 1]], &[], &[]), "mesh 1, triangle 1");
+    bad_near(upload(&[[u32::MAX, u32::MAX]], &[], &[]), "4294967295");
     let q = Quad {
         macro_index: 1,
         ..ok_quad

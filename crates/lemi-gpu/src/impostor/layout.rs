@@ -1,0 +1,505 @@
+//! The CPU side of a cell's impostor (no GPU work): the quads' vertex and index arrays with their
+//! draw calls in draw order, the opaque quads, the boxes a frame culls draw calls by, and the near
+//! geometry copied out of the scene ([`Scene::extract`]), gathered in [`ImpostorCellData`]. See
+//! the module docs of [`crate::impostor`] for the order and why.
+
+use bytemuck::{Pod, Zeroable};
+use lemi_core::bundle::Quad;
+use lemi_core::classify::TriRef;
+use lemi_core::compress::MacroTexture;
+use lemi_core::{Mesh, Scene};
+
+#[cfg(doc)]
+use super::{ImpostorCell, PendingImpostorCell};
+use crate::GpuError;
+
+/// Quad fragments whose macro-texel alpha (0..=1) is below this are discarded.
+pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+
+/// One quad corner on the GPU: world position and macro-texture coordinates (20 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub(super) struct QuadVertex {
+    pub(super) position: [f32; 3],
+    /// Macro-texture coordinates in texels (not normalised).
+    pub(super) uv: [f32; 2],
+    /// The quad's texel rectangle in the macro-texture `[x0, y0, x1, y1]` (same for all four
+    /// vertices): the fragment shader clamps its fetch to it.
+    pub(super) rect: [f32; 4],
+}
+
+const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![
+    0 => Float32x3,
+    1 => Float32x2,
+    2 => Float32x4,
+];
+
+/// How far (in texels of its layer) every quad is grown beyond its texel rectangle, so that
+/// neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
+/// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
+/// (found by the no-crack test). The grown rim shows the quad's edge texels (the fetch is clamped
+/// to the rectangle), so it never shows a neighbour's texels from the macro-texture.
+pub const QUAD_GROWTH_TEXELS: f64 = 1.0 / 16.0;
+
+pub(super) fn quad_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<QuadVertex>() as wgpu::BufferAddress,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &QUAD_ATTRIBUTES,
+    }
+}
+
+/// One draw call: quads of one macro-texture, a contiguous index range, drawn with the opaque
+/// pipeline (every texel of every quad passes the alpha test) or the alpha-tested one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct MacroDraw {
+    pub(super) macro_index: u32,
+    pub(super) first_index: u32,
+    pub(super) index_count: u32,
+    pub(super) opaque: bool,
+}
+
+/// The quads of a cell on the CPU: shared vertex/index arrays and the draw calls in draw order.
+pub(super) struct QuadGeometry {
+    pub(super) vertices: Vec<QuadVertex>,
+    pub(super) indices: Vec<u32>,
+    pub(super) draws: Vec<MacroDraw>,
+    /// The box around each draw call's quads, for culling.
+    pub(super) bounds: Vec<Bounds>,
+    /// Quads drawn without the alpha test.
+    pub(super) opaque_quads: usize,
+}
+
+/// Checks the quads against `macros` and builds their [`QuadGeometry`] (see the module docs for
+/// the order).
+pub(super) fn quad_geometry(
+    quads: &[Quad],
+    macros: &[MacroTexture],
+) -> Result<QuadGeometry, GpuError> {
+    if quads.len() > (u32::MAX / 6) as usize {
+        return Err(GpuError::Limit(format!(
+            "{} quads are more than one cell can index",
+            quads.len()
+        )));
+    }
+    for (k, q) in quads.iter().enumerate() {
+        let Some(m) = macros.get(q.macro_index as usize) else {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} uses macro-texture {} but the cell has {} macro-textures",
+                q.macro_index,
+                macros.len()
+            )));
+        };
+        let [x, y, w, h] = q.rect;
+        if w == 0
+            || h == 0
+            || x as u64 + w as u64 > m.width as u64
+            || y as u64 + h as u64 > m.height as u64
+        {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} has texel rectangle {:?} (x, y, w, h), empty or outside its {}x{} macro-texture {}",
+                q.rect, m.width, m.height, q.macro_index
+            )));
+        }
+        if !q.corners.iter().flatten().all(|c| c.is_finite()) {
+            return Err(GpuError::Invalid(format!(
+                "quad {k} has non-finite corners {:?}",
+                q.corners
+            )));
+        }
+    }
+    let opaque: Vec<bool> = quads
+        .iter()
+        .map(|q| {
+            macros
+                .get(q.macro_index as usize)
+                .is_some_and(|m| rect_opaque(m, q.rect))
+        })
+        .collect();
+    let order = draw_order(quads, &opaque);
+    let mut vertices = Vec::with_capacity(4 * quads.len());
+    let mut indices = Vec::with_capacity(6 * quads.len());
+    let mut draws: Vec<MacroDraw> = Vec::new();
+    let mut bounds: Vec<Bounds> = Vec::new();
+    let mut run = None;
+    for &k in &order {
+        let q = &quads[k];
+        let base = vertices.len() as u32;
+        let uv = q
+            .macro_texel_corners()
+            .map(|t| glam::DVec2::new(t[0] as f64, t[1] as f64));
+        let p = q.corners.map(|c| glam::DVec3::from_array(c.map(f64::from)));
+        // texel steps along the quad's edges (in world space and in the macro-texture)
+        let (w, h) = (
+            (q.texels[2].saturating_sub(q.texels[0])).max(1) as f64,
+            (q.texels[3].saturating_sub(q.texels[1])).max(1) as f64,
+        );
+        let e = QUAD_GROWTH_TEXELS;
+        let (du, dv) = ((p[1] - p[0]) * (e / w), (p[3] - p[0]) * (e / h));
+        let (tu, tv) = ((uv[1] - uv[0]) * (e / w), (uv[3] - uv[0]) * (e / h));
+        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        let [x, y, rw, rh] = q.rect;
+        let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
+        let first = indices.len() as u32;
+        let key = (q.layer, q.face, opaque[k], q.macro_index);
+        if run != Some(key) {
+            run = Some(key);
+            draws.push(MacroDraw {
+                macro_index: q.macro_index,
+                first_index: first,
+                index_count: 0,
+                opaque: opaque[k],
+            });
+            bounds.push(Bounds::EMPTY);
+        }
+        let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
+            continue;
+        };
+        for ((pk, uvk), (su, sv)) in p.iter().zip(&uv).zip(signs) {
+            let pos = *pk + du * su + dv * sv;
+            let t = *uvk + tu * su + tv * sv;
+            let position = pos.as_vec3();
+            b.add(position.as_dvec3());
+            vertices.push(QuadVertex {
+                position: position.to_array(),
+                uv: [t.x as f32, t.y as f32],
+                rect,
+            });
+        }
+        indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
+        d.index_count += 6;
+    }
+    Ok(QuadGeometry {
+        vertices,
+        indices,
+        draws,
+        bounds,
+        opaque_quads: opaque.iter().filter(|&&o| o).count(),
+    })
+}
+
+/// An axis-aligned box around the quads of one draw call (their vertices as uploaded).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Bounds {
+    pub(super) min: glam::DVec3,
+    pub(super) max: glam::DVec3,
+}
+
+impl Bounds {
+    pub(super) const EMPTY: Bounds = Bounds {
+        min: glam::DVec3::splat(f64::INFINITY),
+        max: glam::DVec3::splat(f64::NEG_INFINITY),
+    };
+
+    fn add(&mut self, p: glam::DVec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    /// Whether the box lies entirely outside one of the clip volume's planes of `view_proj`
+    /// (`-w ≤ x, y ≤ w`, `0 ≤ z ≤ w`), by a margin far above the f32 error of the GPU's vertex
+    /// transform, so that a culled draw call could not have produced a single fragment: culling
+    /// never changes the image.
+    pub(super) fn outside(&self, view_proj: &glam::DMat4) -> bool {
+        if !(self.min.cmple(self.max).all()) {
+            return true; // empty
+        }
+        let corners = (0..8).map(|i| {
+            let pick = |bit: usize, lo: f64, hi: f64| if i & bit == 0 { lo } else { hi };
+            let p = glam::DVec3::new(
+                pick(1, self.min.x, self.max.x),
+                pick(2, self.min.y, self.max.y),
+                pick(4, self.min.z, self.max.z),
+            );
+            *view_proj * p.extend(1.0)
+        });
+        let mut out = [true; 6];
+        for c in corners {
+            // plane value ≥ −margin: possibly inside
+            let margin = 1e-4 * (c.x.abs() + c.y.abs() + c.z.abs() + c.w.abs()) + 1e-9;
+            let planes = [c.w + c.x, c.w - c.x, c.w + c.y, c.w - c.y, c.z, c.w - c.z];
+            for (o, v) in out.iter_mut().zip(planes) {
+                if v >= -margin {
+                    *o = false;
+                }
+            }
+        }
+        out.iter().any(|&o| o)
+    }
+}
+
+/// The smallest macro-texel alpha (0..=255) the quad shader keeps: `a / 255 ≥ QUAD_ALPHA_CUTOFF`.
+fn min_kept_alpha() -> u8 {
+    (0..=255u8)
+        .find(|&a| a as f32 / 255.0 >= QUAD_ALPHA_CUTOFF)
+        .unwrap_or(255)
+}
+
+/// Whether every texel of `rect` (`[x, y, w, h]`, inside `m`) passes the alpha test, so the quad
+/// can be drawn without it: the opaque pipeline then writes exactly what the alpha-tested one
+/// would (the fetch is clamped to the rectangle, so even the grown rim shows only these texels).
+fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
+    let keep = min_kept_alpha();
+    let [x, y, w, h] = rect.map(|v| v as usize);
+    let stride = 4 * m.width as usize;
+    (y..y + h).all(|row| {
+        let start = row * stride + 4 * x;
+        m.rgba
+            .get(start..start + 4 * w)
+            .is_some_and(|px| px.chunks_exact(4).all(|t| t[3] >= keep))
+    })
+}
+
+/// The order quads are drawn in, as indices into `quads` (see the module docs): nearest layer
+/// first (a quad's `layer` counts far to near) so that depth rejection skips what nearer layers
+/// hide; within a layer by face (so that a draw call's quads lie in one plane and a view culls
+/// the faces it does not see), the opaque quads before the alpha-tested ones, and by
+/// macro-texture, so that each (layer, face, kind, macro-texture) run is one draw call; ties keep
+/// the cell's order.
+fn draw_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..quads.len()).collect();
+    order.sort_by_key(|&k| {
+        (
+            std::cmp::Reverse(quads[k].layer),
+            quads[k].face,
+            !opaque[k],
+            quads[k].macro_index,
+        )
+    });
+    order
+}
+
+/// A cell's impostor data checked and laid out for the GPU, on the CPU only (no GPU work, `Send`):
+/// the near geometry copied out of the scene, the quads' vertex and index arrays and draw calls,
+/// and the decoded macro-textures. Built by [`ImpostorCellData::prepare`], typically on a
+/// background thread; uploaded with [`ImpostorCell::begin_upload`] and
+/// [`PendingImpostorCell::upload_step`].
+pub struct ImpostorCellData {
+    pub(super) near_meshes: Vec<Mesh>,
+    pub(super) geometry: QuadGeometry,
+    pub(super) macros: Vec<MacroTexture>,
+    pub(super) quad_count: usize,
+}
+
+impl ImpostorCellData {
+    /// Checks and lays out a cell's data, everything but the adapter's limits (those are checked
+    /// by [`ImpostorCell::begin_upload`]; [`ImpostorCell::upload`] runs both). A near list entry naming a mesh or triangle `scene` lacks is [`GpuError::Extract`]; a
+    /// macro-texture whose data does not match its size, a `macro_index` out of range, an empty
+    /// `rect` or one outside its macro-texture and non-finite corners are [`GpuError::Invalid`].
+    pub fn prepare(
+        scene: &Scene,
+        near: &[[u32; 2]],
+        quads: &[Quad],
+        macros: Vec<MacroTexture>,
+    ) -> Result<ImpostorCellData, GpuError> {
+        let near: Vec<TriRef> = near.iter().map(|&pair| TriRef::from(pair)).collect();
+        let near_meshes = scene.extract(&near)?;
+        for (i, m) in macros.iter().enumerate() {
+            let expected = m.width as u64 * m.height as u64 * 4;
+            if m.width == 0 || m.height == 0 || m.rgba.len() as u64 != expected {
+                return Err(GpuError::Invalid(format!(
+                    "macro-texture {i} is {}x{} but has {} bytes of RGBA8 data (expected {expected})",
+                    m.width,
+                    m.height,
+                    m.rgba.len()
+                )));
+            }
+        }
+        let geometry = quad_geometry(quads, &macros)?;
+        Ok(ImpostorCellData {
+            near_meshes,
+            geometry,
+            macros,
+            quad_count: quads.len(),
+        })
+    }
+
+    pub fn quad_count(&self) -> usize {
+        self.quad_count
+    }
+
+    /// Triangles of the near geometry.
+    pub fn near_triangles(&self) -> u64 {
+        self.near_meshes
+            .iter()
+            .map(|m| m.indices.len() as u64 / 3)
+            .sum()
+    }
+
+    /// Bytes of macro-texture data (RGBA8), what the GPU will hold as textures.
+    pub fn texture_bytes(&self) -> u64 {
+        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+    }
+
+    /// Bytes of vertex and index data (near geometry and quads), uploaded by
+    /// [`ImpostorCell::begin_upload`] in one go.
+    pub fn geometry_bytes(&self) -> u64 {
+        let near: u64 = self
+            .near_meshes
+            .iter()
+            .map(|m| {
+                std::mem::size_of_val(m.vertices.as_slice()) as u64
+                    + std::mem::size_of_val(m.indices.as_slice()) as u64
+            })
+            .sum();
+        near + std::mem::size_of_val(self.geometry.vertices.as_slice()) as u64
+            + std::mem::size_of_val(self.geometry.indices.as_slice()) as u64
+    }
+
+    /// Bytes this value holds in main memory (texture plus geometry data; small bookkeeping not
+    /// counted).
+    pub fn cpu_bytes(&self) -> u64 {
+        self.texture_bytes() + self.geometry_bytes()
+    }
+
+    /// The largest macro-texture's bytes (how much [`PendingImpostorCell`] may hold twice, on the
+    /// CPU and the GPU, while it uploads).
+    pub fn largest_texture_bytes(&self) -> u64 {
+        self.macros
+            .iter()
+            .map(|m| m.rgba.len() as u64)
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lemi_core::Face;
+
+    fn quad(macro_index: u32, layer: u16, rect: [u32; 4]) -> Quad {
+        Quad {
+            face: Face::NegZ,
+            layer,
+            texels: [0, 0, rect[2] as u16, rect[3] as u16],
+            corners: [[0.0; 3]; 4],
+            macro_index,
+            rect,
+            rotated: false,
+        }
+    }
+
+    fn macro_texture(width: u32, height: u32) -> MacroTexture {
+        MacroTexture {
+            width,
+            height,
+            rgba: vec![0; (width * height * 4) as usize],
+        }
+    }
+
+    fn opaque_macro(width: u32, height: u32) -> MacroTexture {
+        MacroTexture {
+            width,
+            height,
+            rgba: [9, 9, 9, 255].repeat((width * height) as usize),
+        }
+    }
+
+    fn set_alpha(m: &mut MacroTexture, x: u32, y: u32, a: u8) {
+        m.rgba[(4 * (y * m.width + x) + 3) as usize] = a;
+    }
+
+    #[test]
+    fn quads_draw_nearest_layer_first_opaque_ones_first_by_macro() {
+        let mut m0 = opaque_macro(8, 8);
+        set_alpha(&mut m0, 3, 3, 0);
+        set_alpha(&mut m0, 5, 0, 128); // 128/255 ≥ 0.5: kept
+        set_alpha(&mut m0, 6, 0, 127); // 127/255 < 0.5: discarded
+        assert_eq!(min_kept_alpha(), 128);
+        let macros = [m0, opaque_macro(4, 4)];
+        let quads = [
+            quad(0, 1, [0, 0, 2, 2]), // opaque
+            quad(1, 5, [0, 0, 4, 4]), // opaque
+            quad(0, 3, [2, 2, 2, 2]), // holds (3, 3): alpha-tested
+            quad(0, 1, [6, 0, 1, 1]), // alpha 127: alpha-tested
+            quad(0, 1, [4, 0, 2, 1]), // alpha 255 and 128: opaque
+            quad(1, 1, [0, 0, 2, 2]), // opaque
+        ];
+        let QuadGeometry {
+            vertices: v,
+            indices: i,
+            draws,
+            bounds,
+            opaque_quads,
+        } = quad_geometry(&quads, &macros).expect("valid quads");
+        assert_eq!(bounds.len(), draws.len());
+        assert_eq!(opaque_quads, 4);
+        assert_eq!(v.len(), 24);
+        assert_eq!(i.len(), 36);
+        let d = |macro_index, first_index, quads: u32, opaque| MacroDraw {
+            macro_index,
+            first_index,
+            index_count: 6 * quads,
+            opaque,
+        };
+        // layer 5 (quad 1); layer 3 (quad 2); layer 1: opaque quads 0, 4 (macro 0) and 5
+        // (macro 1), then the alpha-tested quad 3.
+        assert_eq!(
+            draws,
+            vec![
+                d(1, 0, 1, true),
+                d(0, 6, 1, false),
+                d(0, 12, 2, true),
+                d(1, 24, 1, true),
+                d(0, 30, 1, false),
+            ]
+        );
+        // the layer-3 quad (second): rect [2, 2, 2, 2] of 8x8, texel coordinates, grown by
+        // QUAD_GROWTH_TEXELS on every side; the fetch is clamped to the rectangle
+        let g = QUAD_GROWTH_TEXELS as f32;
+        assert_eq!(v[4].uv, [2.0 - g, 2.0 - g]);
+        assert_eq!(v[6].uv, [4.0 + g, 4.0 + g]);
+        assert_eq!(v[4].rect, [2.0, 2.0, 4.0, 4.0]);
+        assert_eq!(v[8].rect, [0.0, 0.0, 2.0, 2.0]);
+        assert_eq!(v[12].rect, [4.0, 0.0, 6.0, 1.0]);
+        assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
+    }
+
+    #[test]
+    fn bounds_outside_the_view_are_culled_only_when_wholly_outside() {
+        use glam::DVec3;
+        let view = lemi_core::camera::Camera::new(
+            DVec3::new(10.0, 0.0, 0.0),
+            -DVec3::Z,
+            DVec3::Y,
+            90.0,
+            64,
+            64,
+        )
+        .expect("camera")
+        .view();
+        let vp = view.view_proj();
+        let b = |min: [f64; 3], max: [f64; 3]| Bounds {
+            min: DVec3::from_array(min) + DVec3::new(10.0, 0.0, 0.0),
+            max: DVec3::from_array(max) + DVec3::new(10.0, 0.0, 0.0),
+        };
+        // in front, straddling the left edge, around the eye: kept
+        assert!(!b([-1.0, -1.0, -6.0], [1.0, 1.0, -5.0]).outside(&vp));
+        assert!(!b([-9.0, -1.0, -5.0], [-4.0, 1.0, -5.0]).outside(&vp));
+        assert!(!b([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]).outside(&vp));
+        // a plane seen edge-on at the frustum's side (x = −z, 45° left): kept
+        assert!(!b([-5.0, -1.0, -5.0], [-5.0, 1.0, -5.0]).outside(&vp));
+        // behind the eye, wholly left, above, right: culled
+        assert!(b([-1.0, -1.0, 2.0], [1.0, 1.0, 3.0]).outside(&vp));
+        assert!(b([-9.0, -1.0, -5.0], [-6.0, 1.0, -5.0]).outside(&vp));
+        assert!(b([-1.0, 6.0, -5.0], [1.0, 8.0, -5.0]).outside(&vp));
+        assert!(b([6.0, -1.0, -5.0], [9.0, 1.0, -5.0]).outside(&vp));
+        assert!(Bounds::EMPTY.outside(&vp));
+    }
+
+    #[test]
+    fn bad_rects_are_errors() {
+        let macros = [macro_texture(8, 8)];
+        for rect in [
+            [0, 0, 0, 2],
+            [7, 0, 2, 1],
+            [0, 0, 8, 9],
+            [u32::MAX, 0, 2, 2],
+        ] {
+            let r = quad_geometry(&[quad(0, 0, rect)], &macros);
+            assert!(matches!(r, Err(GpuError::Invalid(_))), "{rect:?}");
+        }
+        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros).is_ok());
+    }
+}

@@ -1,0 +1,444 @@
+//! Drawing cells: [`ImpostorRenderer`] holds the reference pipeline for the near geometry, the
+//! two quad pipelines (opaque and alpha-tested), the globals and cached render targets, and
+//! renders a cell with or without readback, timing each frame with timestamp queries.
+
+use std::sync::Mutex;
+
+use lemi_core::camera::View;
+
+use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF};
+use super::upload::{macro_format, macro_layout};
+use super::ImpostorCell;
+use crate::renderer::{
+    Frame, GpuTime, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
+};
+use crate::shading::{vertex_layout, ShadingGlobals, SHADING_WGSL};
+use crate::targets::{PassPart, Targets, LINEAR_COLOR_FORMAT};
+use crate::{Gpu, GpuError};
+
+/// The reference renderer's entry points: the near geometry is drawn with exactly this source.
+const RENDER_WGSL: &str = include_str!("../render.wgsl");
+/// The quad entry points, appended to the shading module.
+const IMPOSTOR_WGSL: &str = include_str!("impostor.wgsl");
+
+/// Draws [`ImpostorCell`]s: the reference pipeline for near geometry, the quad pipelines (opaque
+/// and alpha-tested), globals and cached render targets.
+pub struct ImpostorRenderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    near_pipeline: wgpu::RenderPipeline,
+    /// Quads some of whose texels fail the alpha test (`fs_quad`, with `discard`).
+    quad_pipeline: wgpu::RenderPipeline,
+    /// Quads all of whose texels pass it (`fs_quad_opaque`, no `discard`).
+    opaque_pipeline: wgpu::RenderPipeline,
+    /// The macro-texture format this renderer's quad pipelines expect ([`macro_format`]);
+    /// `Rgba8Unorm` means the quads are drawn through the colour target's linear view.
+    macro_format: wgpu::TextureFormat,
+    globals: wgpu::Buffer,
+    globals_group: wgpu::BindGroup,
+    max_dim: u32,
+    targets: Mutex<Option<Targets>>,
+    last_gpu: GpuTime,
+}
+
+impl ImpostorRenderer {
+    pub fn new(gpu: &Gpu) -> Result<ImpostorRenderer, GpuError> {
+        gpu.scoped("creating the impostor render pipelines", || {
+            let device = &gpu.device;
+            let color_targets = [
+                Some(wgpu::ColorTargetState {
+                    format: COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                }),
+                Some(wgpu::ColorTargetState {
+                    format: VIEW_DEPTH_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                }),
+            ];
+            let depth_stencil = Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            });
+            let primitive = wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            };
+            // Near geometry: the reference renderer's exact source and state.
+            let near_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                source: wgpu::ShaderSource::Wgsl(format!("{SHADING_WGSL}\n{RENDER_WGSL}").into()),
+            });
+            let near_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
+                immediate_size: 0,
+            });
+            let near_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("lemi impostor renderer: near geometry"),
+                layout: Some(&near_layout),
+                vertex: wgpu::VertexState {
+                    module: &near_module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
+                primitive,
+                depth_stencil: depth_stencil.clone(),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &near_module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &color_targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            // Quads.
+            let quad_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("lemi impostor renderer: quads"),
+                source: wgpu::ShaderSource::Wgsl(format!("{SHADING_WGSL}\n{IMPOSTOR_WGSL}").into()),
+            });
+            let macro_layout = macro_layout(device);
+            let quad_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi impostor renderer: quads"),
+                bind_group_layouts: &[Some(gpu.globals_layout()), Some(&macro_layout)],
+                immediate_size: 0,
+            });
+            // The quads' colour target: the linear view where macro-textures are linear.
+            let macro_format = macro_format(device);
+            let mut quad_targets = color_targets.clone();
+            if macro_format == wgpu::TextureFormat::Rgba8Unorm {
+                quad_targets[0] = Some(wgpu::ColorTargetState {
+                    format: LINEAR_COLOR_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                });
+            }
+            let quad_pipeline_for = |label: &str, entry_point: &str| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some(label),
+                    layout: Some(&quad_layout),
+                    vertex: wgpu::VertexState {
+                        module: &quad_module,
+                        entry_point: Some("vs_quad"),
+                        compilation_options: Default::default(),
+                        buffers: &[Some(quad_vertex_layout())],
+                    },
+                    primitive,
+                    depth_stencil: depth_stencil.clone(),
+                    multisample: wgpu::MultisampleState::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &quad_module,
+                        entry_point: Some(entry_point),
+                        compilation_options: Default::default(),
+                        targets: &quad_targets,
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
+            let quad_pipeline = quad_pipeline_for("lemi impostor renderer: quads", "fs_quad");
+            let opaque_pipeline =
+                quad_pipeline_for("lemi impostor renderer: opaque quads", "fs_quad_opaque");
+            let globals = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("lemi impostor globals"),
+                size: std::mem::size_of::<ShadingGlobals>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let globals_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lemi impostor globals"),
+                layout: gpu.globals_layout(),
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: globals.as_entire_binding(),
+                }],
+            });
+            ImpostorRenderer {
+                device: gpu.device.clone(),
+                queue: gpu.queue.clone(),
+                near_pipeline,
+                quad_pipeline,
+                opaque_pipeline,
+                macro_format,
+                globals,
+                globals_group,
+                max_dim: gpu.limits().max_texture_dimension_2d,
+                targets: Mutex::new(None),
+                last_gpu: GpuTime::default(),
+            }
+        })
+    }
+
+    /// Renders the cell from `view`: its near geometry (shaded exactly like [`crate::Renderer`],
+    /// including `options.alpha_cutoff`), then its impostor quads, in one pass, and reads the
+    /// colour and depth images back (background: `options.clear`, depth `f32::INFINITY`).
+    pub fn render(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<Frame, GpuError> {
+        self.render_parts(cell, view, options, true, true)
+            .and_then(|f| f.ok_or_else(|| GpuError::Readback("no frame was read back".into())))
+    }
+
+    /// Renders like [`ImpostorRenderer::render`] and waits until the GPU has finished, without
+    /// copying or reading the images back (for timing the rendering alone;
+    /// [`ImpostorRenderer::last_gpu_ms`] is updated too).
+    pub fn render_no_readback(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<(), GpuError> {
+        self.render_parts(cell, view, options, true, false)
+            .map(|_| ())
+    }
+
+    /// GPU time of the last frame's render pass (near geometry and quads) in milliseconds, from
+    /// timestamp queries at its beginning and end, resolved in the frame's own submission; `None`
+    /// before the first frame or without [`wgpu::Features::TIMESTAMP_QUERY`]. See
+    /// [`crate::Renderer::last_gpu_ms`].
+    pub fn last_gpu_ms(&self) -> Option<f64> {
+        self.last_gpu.get()
+    }
+
+    /// Like [`ImpostorRenderer::render`] but only the impostor quads, without the near geometry.
+    pub fn render_impostors_only(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<Frame, GpuError> {
+        self.render_parts(cell, view, options, false, true)
+            .and_then(|f| f.ok_or_else(|| GpuError::Readback("no frame was read back".into())))
+    }
+
+    fn render_parts(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+        with_near: bool,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        let (width, height) = (view.width, view.height);
+        if width == 0 || height == 0 || width > self.max_dim || height > self.max_dim {
+            return Err(GpuError::Limit(format!(
+                "image size {width}x{height} is outside what this adapter renders (1..={} per side)",
+                self.max_dim
+            )));
+        }
+        let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
+        globals.params[1] = QUAD_ALPHA_CUTOFF;
+        let near = &cell.near;
+        for chunk in near.geometry.chunks() {
+            if near.materials.bind_group(chunk.material).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "near geometry uses material {} but only {} materials were uploaded",
+                    chunk.material,
+                    near.materials.len()
+                )));
+            }
+        }
+        for d in &cell.draws {
+            if cell.macro_groups.get(d.macro_index as usize).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "quads use macro-texture {} but only {} were uploaded",
+                    d.macro_index,
+                    cell.macro_groups.len()
+                )));
+            }
+        }
+        if cell.macro_format != self.macro_format && !cell.draws.is_empty() {
+            return Err(GpuError::Invalid(format!(
+                "the cell's macro-textures are {:?} but this renderer draws {:?} ones: the cell was \
+                 uploaded on another device",
+                cell.macro_format, self.macro_format
+            )));
+        }
+        let mut guard = self
+            .targets
+            .lock()
+            .map_err(|_| GpuError::Readback("render target cache poisoned".into()))?;
+        if guard
+            .as_ref()
+            .is_none_or(|t| t.width != width || t.height != height)
+        {
+            *guard = Some(crate::device::scoped(
+                &self.device,
+                "creating impostor render targets",
+                || Targets::new(&self.device, width, height, "lemi impostor"),
+            )?);
+        }
+        let Some(targets) = guard.as_ref() else {
+            return Err(GpuError::Readback("render targets missing".into()));
+        };
+        let linear = self.macro_format == wgpu::TextureFormat::Rgba8Unorm;
+        if linear && !targets.has_linear_color() {
+            return Err(GpuError::Invalid(
+                "the colour target has no linear view for the quads".into(),
+            ));
+        }
+        let draw_near = with_near && !near.geometry.chunks().is_empty();
+        let view_proj = view.view_proj();
+        let quads = cell
+            .quad_buffers
+            .as_ref()
+            .filter(|_| !cell.draws.is_empty());
+        crate::device::scoped(&self.device, "rendering impostors", || {
+            self.queue
+                .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
+            let mut encoder = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("lemi impostor render"),
+                });
+            // Near geometry into the sRGB view; quads into the linear view where macro-textures
+            // are linear, so a frame with both takes two passes (the second loads the first's
+            // targets, depth included).
+            let two_passes = linear && draw_near && quads.is_some();
+            let mut pass = targets.begin_pass_part(
+                &mut encoder,
+                "lemi impostor pass",
+                if two_passes {
+                    PassPart::First
+                } else {
+                    PassPart::Whole
+                },
+                linear && !draw_near,
+                true,
+            );
+            if draw_near {
+                pass.set_pipeline(&self.near_pipeline);
+                pass.set_bind_group(0, &self.globals_group, &[]);
+                let mut bound = None;
+                for chunk in near.geometry.chunks() {
+                    if bound != Some(chunk.material) {
+                        if let Some(g) = near.materials.bind_group(chunk.material) {
+                            pass.set_bind_group(1, g, &[]);
+                        }
+                        bound = Some(chunk.material);
+                    }
+                    pass.set_vertex_buffer(0, chunk.vertices.slice(..));
+                    pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    pass.draw_indexed(0..chunk.index_count, 0, 0..1);
+                }
+            }
+            if two_passes {
+                drop(pass);
+                pass = targets.begin_pass_part(
+                    &mut encoder,
+                    "lemi impostor quad pass",
+                    PassPart::Last,
+                    true,
+                    true,
+                );
+            }
+            if let Some((vertices, indices)) = quads {
+                pass.set_bind_group(0, &self.globals_group, &[]);
+                pass.set_vertex_buffer(0, vertices.slice(..));
+                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                let (mut pipeline, mut bound) = (None, None);
+                for (d, b) in cell.draws.iter().zip(&cell.bounds) {
+                    let Some(g) = cell.macro_groups.get(d.macro_index as usize) else {
+                        continue;
+                    };
+                    if b.outside(&view_proj) {
+                        continue;
+                    }
+                    if pipeline != Some(d.opaque) {
+                        pass.set_pipeline(if d.opaque {
+                            &self.opaque_pipeline
+                        } else {
+                            &self.quad_pipeline
+                        });
+                        pipeline = Some(d.opaque);
+                    }
+                    if bound != Some(d.macro_index) {
+                        pass.set_bind_group(1, g, &[]);
+                        bound = Some(d.macro_index);
+                    }
+                    pass.draw_indexed(d.first_index..d.first_index + d.index_count, 0, 0..1);
+                }
+            }
+            drop(pass);
+            targets.resolve_timer(&mut encoder);
+            if readback {
+                targets.copy_to_readback(&mut encoder);
+            }
+            self.queue.submit([encoder.finish()]);
+        })?;
+        if !readback {
+            self.last_gpu
+                .set(targets.read_timer(&self.device, &self.queue)?);
+            return Ok(None);
+        }
+        // Every drawn fragment writes alpha 1; alpha 0 is the clear.
+        let (frame, ms) = targets.read_frame(&self.device, &self.queue, options.clear)?;
+        self.last_gpu.set(ms);
+        Ok(Some(frame))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Timestamps and frames without readback, of [`ImpostorRenderer`] and of the reference
+    //! [`crate::Renderer`].
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::impostor::test_support::{gpu, pattern, quad, scene, view};
+    use crate::{GpuMaterials, GpuScene, UploadOptions};
+
+    #[test]
+    fn gpu_times_and_frames_without_readback() {
+        let Some(gpu) = gpu() else { return };
+        let scene = scene();
+        let materials =
+            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+        let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1)];
+        let quads = [
+            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
+            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
+        ];
+        let near = [[0u32, 0u32]];
+        let cell = ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &macros)
+            .expect("upload");
+        let view = view();
+        let opts = RenderOptions::default();
+        let check = |ms: Option<f64>| {
+            if gpu.has_timestamps() {
+                assert!(ms.is_some_and(|ms| ms.is_finite() && ms >= 0.0), "{ms:?}");
+            } else {
+                assert_eq!(ms, None);
+            }
+        };
+        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        assert_eq!(r.last_gpu_ms(), None, "no frame yet");
+        let first = r.render(&cell, &view, &opts).expect("render");
+        check(r.last_gpu_ms());
+        r.render_no_readback(&cell, &view, &opts)
+            .expect("no readback");
+        check(r.last_gpu_ms());
+        assert!(r.render(&cell, &view, &opts).expect("again") == first);
+        let reference = crate::Renderer::new(&gpu).expect("reference renderer");
+        let all = GpuScene::upload(&gpu, &scene, &UploadOptions::default()).expect("scene");
+        assert_eq!(reference.last_gpu_ms(), None);
+        let want = reference.render(&all, &view, &opts).expect("reference");
+        check(reference.last_gpu_ms());
+        reference
+            .render_no_readback(&all, &view, &opts)
+            .expect("reference without readback");
+        check(reference.last_gpu_ms());
+        assert!(reference.render(&all, &view, &opts).expect("again") == want);
+    }
+}

@@ -1,0 +1,560 @@
+//! Uploading a cell, along one path: [`ImpostorCell::begin_upload`] checks the adapter's limits
+//! and uploads the geometry in one go, [`PendingImpostorCell::upload_step`] writes the
+//! macro-textures a few rows at a time within a byte budget, and [`PendingImpostorCell::finish`]
+//! hands over the drawable [`ImpostorCell`]. This is the streaming runtime's upload (GI 2002
+//! sec. 3, runtime step 2: "to amortize the cost of texture downloads over several frames,
+//! prefetched impostor textures are downloaded to texture memory in smaller chunks"). The one-shot
+//! [`ImpostorCell::upload`] is the same path run to completion: [`ImpostorCellData::prepare`],
+//! [`ImpostorCell::begin_upload`], one unbounded [`PendingImpostorCell::upload_step`] and
+//! [`PendingImpostorCell::finish`].
+
+use std::sync::Arc;
+
+use lemi_core::bundle::Quad;
+use lemi_core::compress::MacroTexture;
+use lemi_core::Scene;
+use wgpu::util::DeviceExt;
+
+use super::layout::{Bounds, ImpostorCellData, MacroDraw, QuadGeometry};
+#[cfg(doc)]
+use super::ImpostorRenderer;
+use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
+use crate::{Gpu, GpuError};
+
+/// Group 1 of the quad pipeline: macro-texture (binding 3) and its nearest sampler (binding 4).
+/// Created by both [`ImpostorCell::begin_upload`] and [`ImpostorRenderer::new`]; wgpu deduplicates
+/// equal layouts, and WebGPU makes equal layouts compatible in any case.
+pub(super) fn macro_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("lemi macro-texture"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                count: None,
+            },
+        ],
+    })
+}
+
+/// GPU resources of one baked cell: its near geometry, its macro-textures and its quads.
+pub struct ImpostorCell {
+    pub(super) near: GpuScene,
+    /// Vertex and index buffer of all quads; `None` without quads.
+    pub(super) quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    /// One bind group per macro-texture, in the cell's order.
+    pub(super) macro_groups: Vec<wgpu::BindGroup>,
+    /// Draw calls in draw order (nearest layer first).
+    pub(super) draws: Vec<MacroDraw>,
+    /// The box around each draw call's quads.
+    pub(super) bounds: Vec<Bounds>,
+    quad_count: usize,
+    opaque_quads: usize,
+    texture_bytes: u64,
+    /// The macro-textures' format ([`macro_format`]).
+    pub(super) macro_format: wgpu::TextureFormat,
+}
+
+impl ImpostorCell {
+    /// `materials`: the scene's materials uploaded once ([`GpuMaterials::upload`]); `scene`: the
+    /// scene the cell was baked from; `near`: the cell's near list, (mesh index, triangle index)
+    /// pairs into `scene.meshes` (out-of-range pairs are [`GpuError::Extract`] naming the pair;
+    /// triangles whose vertex indices are out of range are skipped, as [`GpuGeometry::upload`]
+    /// does); `quads` and `macros`: from the cell file (a `macro_index` out of range, an empty
+    /// `rect` or one outside its macro-texture, non-finite corners and macro-textures whose data
+    /// does not match their size are [`GpuError::Invalid`]; macro-textures larger than the
+    /// adapter's texture limit are [`GpuError::Limit`]).
+    ///
+    /// All input is checked before any GPU work. This is the incremental upload run to
+    /// completion ([`ImpostorCellData::prepare`], [`ImpostorCell::begin_upload`], one
+    /// [`PendingImpostorCell::upload_step`] without a budget, [`PendingImpostorCell::finish`]); it
+    /// copies `macros` once, and frees each copy as soon as its texture is written.
+    pub fn upload(
+        gpu: &Gpu,
+        materials: Arc<GpuMaterials>,
+        scene: &Scene,
+        near: &[[u32; 2]],
+        quads: &[Quad],
+        macros: &[MacroTexture],
+    ) -> Result<ImpostorCell, GpuError> {
+        let data = ImpostorCellData::prepare(scene, near, quads, macros.to_vec())?;
+        let mut pending = ImpostorCell::begin_upload(gpu, materials, data)?;
+        pending.upload_step(gpu, u64::MAX)?;
+        pending.finish()
+    }
+
+    /// Triangles of the near geometry on the GPU.
+    pub fn near_triangles(&self) -> u64 {
+        self.near.triangle_count()
+    }
+
+    /// Impostor quads of the cell.
+    pub fn quad_count(&self) -> usize {
+        self.quad_count
+    }
+
+    /// Bytes of macro-texture data on the GPU (RGBA8, no mipmaps).
+    pub fn texture_bytes(&self) -> u64 {
+        self.texture_bytes
+    }
+
+    /// Draw calls the quads take: one per run of quads of one layer, one kind (opaque or
+    /// alpha-tested) and one macro-texture.
+    pub fn quad_draw_calls(&self) -> usize {
+        self.draws.len()
+    }
+
+    /// Quads whose texels all pass the alpha test, drawn with the opaque pipeline (no `discard`,
+    /// so the rasterizer may test and write depth before shading).
+    pub fn opaque_quad_count(&self) -> usize {
+        self.opaque_quads
+    }
+}
+
+/// The format macro-textures are uploaded in on `device`. Their texels are final sRGB-encoded
+/// colours that the quads copy to the sRGB colour target unchanged. Where the colour target has a
+/// linear view ([`crate::targets::linear_views_supported`]) they are `Rgba8Unorm` and drawn
+/// through that view: no sRGB decode on fetching, no encode on storing (both cost a software
+/// rasterizer much), the bytes pass through. Elsewhere (GL) they are `Rgba8UnormSrgb`, drawn into
+/// the sRGB view: decoded on fetching and re-encoded on storing, which round-trips exactly.
+pub(super) fn macro_format(device: &wgpu::Device) -> wgpu::TextureFormat {
+    if crate::targets::linear_views_supported(device) {
+        wgpu::TextureFormat::Rgba8Unorm
+    } else {
+        wgpu::TextureFormat::Rgba8UnormSrgb
+    }
+}
+
+/// A cell whose upload is in progress: the geometry is on the GPU, the macro-textures are written
+/// row by row by [`PendingImpostorCell::upload_step`]. It cannot be drawn (there is no way to hand
+/// it to [`ImpostorRenderer`]); [`PendingImpostorCell::finish`] turns a complete one into an
+/// [`ImpostorCell`].
+///
+/// A macro-texture's GPU texture is created when its first rows are written and its CPU copy is
+/// freed when its last row is, so a cell in transit holds at most one macro-texture twice.
+pub struct PendingImpostorCell {
+    near: GpuScene,
+    quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
+    layout: wgpu::BindGroupLayout,
+    sampler: wgpu::Sampler,
+    /// One bind group per macro-texture begun so far, in order.
+    macro_groups: Vec<wgpu::BindGroup>,
+    /// The texture being written (the last one of `macro_groups`), until it is complete.
+    current: Option<wgpu::Texture>,
+    /// CPU copies; a completed macro-texture's `rgba` is emptied.
+    macros: Vec<MacroTexture>,
+    draws: Vec<MacroDraw>,
+    bounds: Vec<Bounds>,
+    quad_count: usize,
+    opaque_quads: usize,
+    texture_bytes: u64,
+    macro_format: wgpu::TextureFormat,
+    geometry_bytes: u64,
+    /// Next macro-texture and row to write.
+    next_macro: usize,
+    next_row: u32,
+    uploaded: u64,
+}
+
+impl ImpostorCell {
+    /// Starts an incremental upload: checks the adapter's limits (macro-textures larger than its
+    /// textures, quad arrays larger than its buffers are [`GpuError::Limit`]), uploads the near
+    /// geometry and the quads' vertex and index buffers (in one go) and returns the cell with no
+    /// macro-texture written yet. Then call [`PendingImpostorCell::upload_step`] until it reports
+    /// completion and [`PendingImpostorCell::finish`]. [`ImpostorCell::upload`] is this path run
+    /// to completion at once; whatever the budgets, the result draws exactly like its.
+    pub fn begin_upload(
+        gpu: &Gpu,
+        materials: Arc<GpuMaterials>,
+        data: ImpostorCellData,
+    ) -> Result<PendingImpostorCell, GpuError> {
+        let limits = gpu.limits();
+        let max_dim = limits.max_texture_dimension_2d;
+        for (i, m) in data.macros.iter().enumerate() {
+            if m.width > max_dim || m.height > max_dim {
+                return Err(GpuError::Limit(format!(
+                    "macro-texture {i} is {}x{}, larger than this adapter's textures ({max_dim} per side)",
+                    m.width, m.height
+                )));
+            }
+        }
+        let texture_bytes = data.texture_bytes();
+        let ImpostorCellData {
+            near_meshes,
+            geometry:
+                QuadGeometry {
+                    vertices,
+                    indices,
+                    draws,
+                    bounds,
+                    opaque_quads,
+                },
+            macros,
+            quad_count,
+        } = data;
+        let vertex_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
+        let index_bytes = std::mem::size_of_val(indices.as_slice()) as u64;
+        if vertex_bytes.max(index_bytes) > limits.max_buffer_size {
+            return Err(GpuError::Limit(format!(
+                "{quad_count} quads need a {} byte buffer, more than this adapter's {} bytes",
+                vertex_bytes.max(index_bytes),
+                limits.max_buffer_size
+            )));
+        }
+        let geometry = GpuGeometry::upload(gpu, &near_meshes, &UploadOptions::default())?;
+        drop(near_meshes);
+        let near = GpuScene::from_parts(materials, geometry)?;
+        let (quad_buffers, layout, sampler) = gpu.scoped("uploading impostor quads", || {
+            let device = &gpu.device;
+            let quad_buffers = (!indices.is_empty()).then(|| {
+                let v = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad vertices"),
+                    contents: bytemuck::cast_slice(&vertices),
+                    usage: wgpu::BufferUsages::VERTEX,
+                });
+                let i = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("lemi impostor quad indices"),
+                    contents: bytemuck::cast_slice(&indices),
+                    usage: wgpu::BufferUsages::INDEX,
+                });
+                (v, i)
+            });
+            let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("lemi macro-texture sampler"),
+                address_mode_u: wgpu::AddressMode::ClampToEdge,
+                address_mode_v: wgpu::AddressMode::ClampToEdge,
+                address_mode_w: wgpu::AddressMode::ClampToEdge,
+                mag_filter: wgpu::FilterMode::Nearest,
+                min_filter: wgpu::FilterMode::Nearest,
+                mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+                ..Default::default()
+            });
+            (quad_buffers, macro_layout(device), sampler)
+        })?;
+        let geometry_bytes = buffer_bytes(&quad_buffers, &near);
+        Ok(PendingImpostorCell {
+            near,
+            quad_buffers,
+            layout,
+            sampler,
+            macro_groups: Vec::with_capacity(macros.len()),
+            current: None,
+            macros,
+            draws,
+            bounds,
+            quad_count,
+            opaque_quads,
+            texture_bytes,
+            macro_format: macro_format(&gpu.device),
+            geometry_bytes,
+            next_macro: 0,
+            next_row: 0,
+            uploaded: 0,
+        })
+    }
+
+    /// Bytes this cell holds on the GPU: macro-textures plus vertex and index buffers.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.texture_bytes + buffer_bytes(&self.quad_buffers, &self.near)
+    }
+}
+
+/// Bytes of a cell's vertex and index buffers (quads and near geometry) as allocated.
+fn buffer_bytes(quad_buffers: &Option<(wgpu::Buffer, wgpu::Buffer)>, near: &GpuScene) -> u64 {
+    let quads = quad_buffers
+        .as_ref()
+        .map_or(0, |(v, i)| v.size() + i.size());
+    let near: u64 = near
+        .geometry
+        .chunks()
+        .iter()
+        .map(|c| c.vertices.size() + c.indices.size())
+        .sum();
+    quads + near
+}
+
+impl PendingImpostorCell {
+    /// Writes up to `max_bytes` of macro-texture rows (with `queue.write_texture`, whole rows, in
+    /// the cell's macro-texture order; at least one row per call, so a budget below one row still
+    /// progresses) and returns whether every macro-texture is now complete. The writes are queued
+    /// and reach the GPU with the next submission, before any later draw.
+    pub fn upload_step(&mut self, gpu: &Gpu, max_bytes: u64) -> Result<bool, GpuError> {
+        if self.is_complete() {
+            return Ok(true);
+        }
+        gpu.scoped("uploading macro-texture rows", || {
+            let mut written = 0u64;
+            while let Some(m) = self.macros.get(self.next_macro) {
+                let row_bytes = 4 * m.width as u64;
+                let rows_left = m.height - self.next_row;
+                let fit = (max_bytes.saturating_sub(written) / row_bytes).min(rows_left as u64);
+                let rows = if written == 0 { fit.max(1) } else { fit } as u32;
+                if rows == 0 {
+                    break;
+                }
+                if self.current.is_none() {
+                    let label = format!("lemi macro-texture {}", self.next_macro);
+                    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+                        label: Some(&label),
+                        size: wgpu::Extent3d {
+                            width: m.width,
+                            height: m.height,
+                            depth_or_array_layers: 1,
+                        },
+                        mip_level_count: 1,
+                        sample_count: 1,
+                        dimension: wgpu::TextureDimension::D2,
+                        format: self.macro_format,
+                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                        view_formats: &[],
+                    });
+                    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+                    self.macro_groups.push(gpu.device.create_bind_group(
+                        &wgpu::BindGroupDescriptor {
+                            label: Some(&label),
+                            layout: &self.layout,
+                            entries: &[
+                                wgpu::BindGroupEntry {
+                                    binding: 3,
+                                    resource: wgpu::BindingResource::TextureView(&view),
+                                },
+                                wgpu::BindGroupEntry {
+                                    binding: 4,
+                                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                                },
+                            ],
+                        },
+                    ));
+                    self.current = Some(texture);
+                }
+                let Some(texture) = self.current.as_ref() else {
+                    break;
+                };
+                let start = (self.next_row as u64 * row_bytes) as usize;
+                let end = start + (rows as u64 * row_bytes) as usize;
+                gpu.queue.write_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d {
+                            x: 0,
+                            y: self.next_row,
+                            z: 0,
+                        },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    &m.rgba[start..end],
+                    wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(4 * m.width),
+                        rows_per_image: Some(rows),
+                    },
+                    wgpu::Extent3d {
+                        width: m.width,
+                        height: rows,
+                        depth_or_array_layers: 1,
+                    },
+                );
+                written += rows as u64 * row_bytes;
+                self.uploaded += rows as u64 * row_bytes;
+                self.next_row += rows;
+                if self.next_row == m.height {
+                    // Complete: the GPU texture stays alive through its bind group.
+                    self.macros[self.next_macro].rgba = Vec::new();
+                    self.current = None;
+                    self.next_macro += 1;
+                    self.next_row = 0;
+                }
+            }
+        })?;
+        Ok(self.is_complete())
+    }
+
+    /// Whether every macro-texture has been written.
+    pub fn is_complete(&self) -> bool {
+        self.next_macro >= self.macros.len()
+    }
+
+    /// Macro-texture bytes written so far.
+    pub fn uploaded_bytes(&self) -> u64 {
+        self.uploaded
+    }
+
+    /// Macro-texture bytes still to write.
+    pub fn remaining_bytes(&self) -> u64 {
+        self.texture_bytes - self.uploaded
+    }
+
+    /// Bytes of macro-texture data of the whole cell.
+    pub fn texture_bytes(&self) -> u64 {
+        self.texture_bytes
+    }
+
+    /// Bytes of the vertex and index buffers [`ImpostorCell::begin_upload`] created and filled.
+    pub fn geometry_bytes(&self) -> u64 {
+        self.geometry_bytes
+    }
+
+    /// Bytes held on the GPU so far: geometry buffers plus the macro-textures created so far.
+    pub fn gpu_bytes(&self) -> u64 {
+        let textures: u64 = self
+            .macros
+            .iter()
+            .take(self.macro_groups.len())
+            .map(|m| 4 * m.width as u64 * m.height as u64)
+            .sum();
+        self.geometry_bytes + textures
+    }
+
+    /// Bytes of macro-texture data still held in main memory.
+    pub fn cpu_bytes(&self) -> u64 {
+        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+    }
+
+    /// The drawable cell; [`GpuError::Invalid`] if some macro-texture is not completely written.
+    pub fn finish(self) -> Result<ImpostorCell, GpuError> {
+        if !self.is_complete() || self.macro_groups.len() != self.macros.len() {
+            return Err(GpuError::Invalid(format!(
+                "the cell's upload is incomplete: {} of {} macro-texture bytes written",
+                self.uploaded, self.texture_bytes
+            )));
+        }
+        Ok(ImpostorCell {
+            near: self.near,
+            quad_buffers: self.quad_buffers,
+            macro_groups: self.macro_groups,
+            draws: self.draws,
+            bounds: self.bounds,
+            quad_count: self.quad_count,
+            opaque_quads: self.opaque_quads,
+            texture_bytes: self.texture_bytes,
+            macro_format: self.macro_format,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The incremental upload ([`ImpostorCell::begin_upload`] + [`PendingImpostorCell`]) against
+    //! the one-shot [`ImpostorCell::upload`].
+    use super::*;
+
+    use crate::impostor::test_support::{gpu, pattern, quad, scene, view};
+    use crate::{ImpostorRenderer, RenderOptions};
+    use lemi_core::scene::ExtractError;
+
+    #[test]
+    fn incremental_upload_renders_like_the_one_shot_upload() {
+        let Some(gpu) = gpu() else { return };
+        let scene = scene();
+        let materials =
+            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+        // Three macro-textures of different widths (rows of 52, 128 and 36 bytes).
+        let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1), pattern(9, 21, 2)];
+        let quads = [
+            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
+            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
+            quad(2, [0, 0, 9, 21], [0.5, 3.5, 0.5, 4.0, -5.5]),
+            quad(1, [4, 4, 8, 8], [-1.0, 1.0, -1.0, 1.0, -7.0]),
+        ];
+        let near = [[0u32, 0u32]];
+        let total: u64 = macros.iter().map(|m| m.rgba.len() as u64).sum();
+        let one_shot =
+            ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &macros)
+                .expect("one-shot upload");
+        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        let view = view();
+        let opts = RenderOptions::default();
+        let want = r.render(&one_shot, &view, &opts).expect("render one-shot");
+        assert!(want.covered_count() > 1000, "{}", want.covered_count());
+        for budget in [0u64, 1, 100, 200, 1000, u64::MAX] {
+            let data =
+                ImpostorCellData::prepare(&scene, &near, &quads, macros.clone()).expect("prepare");
+            assert_eq!(data.texture_bytes(), total);
+            assert_eq!(data.quad_count(), 4);
+            assert_eq!(data.near_triangles(), 1);
+            let mut pending =
+                ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+            assert_eq!(pending.texture_bytes(), total);
+            assert_eq!(pending.geometry_bytes() + total, one_shot.gpu_bytes());
+            assert!(!pending.is_complete());
+            let mut steps = 0;
+            loop {
+                let before = pending.uploaded_bytes();
+                let done = pending.upload_step(&gpu, budget).expect("upload step");
+                let step = pending.uploaded_bytes() - before;
+                // at most the budget, or one row (128 bytes at most here) when below it
+                assert!(step > 0, "a step always progresses");
+                assert!(
+                    step <= budget.max(128),
+                    "step of {step} bytes, budget {budget}"
+                );
+                steps += 1;
+                assert_eq!(pending.uploaded_bytes() + pending.remaining_bytes(), total);
+                if done {
+                    break;
+                }
+                assert!(steps < 10_000);
+            }
+            assert_eq!(pending.uploaded_bytes(), total);
+            assert_eq!(pending.cpu_bytes(), 0, "CPU copies are freed once uploaded");
+            if budget == u64::MAX {
+                assert_eq!(steps, 1);
+            } else if budget >= 128 {
+                assert!(steps as u64 >= total / budget, "{steps} steps");
+            }
+            let cell = pending.finish().expect("finish");
+            assert_eq!(cell.texture_bytes(), one_shot.texture_bytes());
+            assert_eq!(cell.gpu_bytes(), one_shot.gpu_bytes());
+            assert_eq!(cell.quad_draw_calls(), one_shot.quad_draw_calls());
+            let got = r.render(&cell, &view, &opts).expect("render incremental");
+            assert!(
+                got == want,
+                "budget {budget}: the incremental upload renders differently"
+            );
+        }
+        // An incomplete cell cannot be finished.
+        let data = ImpostorCellData::prepare(&scene, &near, &quads, macros.clone()).expect("prep");
+        let mut pending = ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+        pending.upload_step(&gpu, 300).expect("step");
+        match pending.finish() {
+            Err(GpuError::Invalid(m)) => assert!(m.contains("incomplete"), "{m}"),
+            Err(e) => panic!("expected Invalid, got {e}"),
+            Ok(_) => panic!("an incomplete upload finished"),
+        }
+        // A cell without macro-textures is complete at once.
+        let data = ImpostorCellData::prepare(&scene, &near, &[], Vec::new()).expect("prep");
+        let pending = ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
+        assert!(pending.is_complete());
+        assert_eq!(pending.finish().expect("finish").near_triangles(), 1);
+        // prepare checks like upload does.
+        let short = MacroTexture {
+            width: 4,
+            height: 4,
+            rgba: vec![0; 3],
+        };
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &near, &[], vec![short]),
+            Err(GpuError::Invalid(_))
+        ));
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &[[3, 0]], &[], Vec::new()),
+            Err(GpuError::Extract(ExtractError::NoMesh { .. }))
+        ));
+        assert!(matches!(
+            ImpostorCellData::prepare(&scene, &[], &quads, Vec::new()),
+            Err(GpuError::Invalid(_))
+        ));
+    }
+}
