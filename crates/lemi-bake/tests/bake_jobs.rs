@@ -23,15 +23,10 @@ use lemi_core::bundle::{
 };
 use lemi_core::cell::{CellGrid, Shard, ViewCell};
 use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
-use lemi_gpu::Gpu;
+use lemi_testkit::{add_closed_box as add_box, gpu};
 
 // ---------------------------------------------------------------------------------------------
 // fixtures
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
 
 /// Small parameters: with α = 0.02 rad the 4 layers of a 10 m cell lie at about 393, 131, 79 and
 /// 56 m, the near field ends at about 49 m.
@@ -49,57 +44,6 @@ fn params() -> BakeParams {
         micro_threshold: 0.6,
         layering: Default::default(),
     }
-}
-
-fn vertex(p: [f32; 3], n: [f32; 3], uv: [f32; 2], color: [u8; 4]) -> Vertex {
-    Vertex::new(p, n, uv, color)
-}
-
-/// An axis-aligned box standing on the ground: 6 faces with their own normals, 12 triangles.
-fn add_box(b: &mut SceneBuilder, material: u32, min: [f32; 3], max: [f32; 3], color: [u8; 4]) {
-    let [x0, y0, z0] = min;
-    let [x1, y1, z1] = max;
-    // (normal, 4 corners counter-clockwise seen from outside)
-    let faces: [([f32; 3], [[f32; 3]; 4]); 6] = [
-        (
-            [1.0, 0.0, 0.0],
-            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
-        ),
-        (
-            [-1.0, 0.0, 0.0],
-            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
-        ),
-        (
-            [0.0, 1.0, 0.0],
-            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
-        ),
-        (
-            [0.0, -1.0, 0.0],
-            [[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]],
-        ),
-        (
-            [0.0, 0.0, 1.0],
-            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
-        ),
-        (
-            [0.0, 0.0, -1.0],
-            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
-        ),
-    ];
-    let mut mesh = Mesh {
-        material,
-        ..Default::default()
-    };
-    let uv = [[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]];
-    for (n, corners) in faces {
-        let base = mesh.vertices.len() as u32;
-        for (c, t) in corners.iter().zip(uv) {
-            mesh.vertices.push(vertex(*c, n, t, color));
-        }
-        mesh.indices
-            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    b.add_mesh(mesh);
 }
 
 /// The test scene (deterministic): a ground of 20 m tiles over ±520 m with a checker of vertex
@@ -161,7 +105,7 @@ fn scene() -> Scene {
                 [x0 + tile, z0 + tile],
                 [x0 + tile, z0],
             ] {
-                mesh.vertices.push(vertex(
+                mesh.vertices.push(Vertex::new(
                     [x, 0.0, z],
                     [0.0, 1.0, 0.0],
                     [x / tile, z / tile],

@@ -63,6 +63,7 @@ use lemi_gpu::{
     Frame, Gpu, GpuGeometry, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, LayerRecorder,
     Lighting, MaterialRun, RenderOptions, Renderer, UploadOptions,
 };
+use lemi_testkit::gpu;
 
 /// Texels per face side, and the output view's width and height (90° field of view).
 const RES: u32 = 128;
@@ -85,11 +86,6 @@ const ALL_FACES: [Face; 6] = [
     Face::PosZ,
     Face::NegZ,
 ];
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
 
 // ---------------------------------------------------------------------------------------------
 // Scenes

@@ -31,16 +31,12 @@ use lemi_gpu::{
     Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions, Renderer,
     UploadOptions,
 };
+use lemi_testkit::gpu;
 
 /// Texels per face side, and the width of the compared views.
 const RES: u32 = 64;
 const LAYERS: u32 = 4;
 const ALPHA: f64 = 0.02;
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
 
 fn params(layering: Layering) -> BakeParams {
     BakeParams {
@@ -83,46 +79,20 @@ fn vertex(p: [f32; 3], n: [f32; 3], color: [u8; 4]) -> Vertex {
     Vertex::new(p, n, [0.0; 2], color)
 }
 
-/// An axis-aligned box standing on the ground, its own colour per side (12 triangles).
+/// An axis-aligned box standing on the ground, its own shade of `color` per side (12 triangles).
 fn add_box(mesh: &mut Mesh, min: [f32; 3], max: [f32; 3], color: [u8; 3]) {
-    let [x0, y0, z0] = min;
-    let [x1, y1, z1] = max;
-    let sides: [([f32; 3], [[f32; 3]; 4], f32); 5] = [
-        (
-            [1.0, 0.0, 0.0],
-            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
-            1.0,
-        ),
-        (
-            [-1.0, 0.0, 0.0],
-            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
-            0.8,
-        ),
-        (
-            [0.0, 1.0, 0.0],
-            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
-            0.6,
-        ),
-        (
-            [0.0, 0.0, 1.0],
-            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
-            0.9,
-        ),
-        (
-            [0.0, 0.0, -1.0],
-            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
-            0.7,
-        ),
-    ];
-    for (n, corners, shade) in sides {
-        let c = color.map(|v| (v as f32 * shade) as u8);
-        let base = mesh.vertices.len() as u32;
-        for p in corners {
-            mesh.vertices.push(vertex(p, n, [c[0], c[1], c[2], 255]));
-        }
-        mesh.indices
-            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
+    let shade = |n: [f32; 3]| match n {
+        [1.0, _, _] => 1.0,
+        [-1.0, _, _] => 0.8,
+        [_, 1.0, _] => 0.6,
+        [_, _, 1.0] => 0.9,
+        _ => 0.7,
+    };
+    let sides = lemi_testkit::box_sides(min, max, false);
+    lemi_testkit::push_quads(mesh, &sides, lemi_testkit::NO_UV, |n| {
+        let c = color.map(|v| (v as f32 * shade(n)) as u8);
+        [c[0], c[1], c[2], 255]
+    });
 }
 
 /// Height of the test terrain: flat within 60 m of the cell, then rising ever more steeply (a

@@ -15,10 +15,7 @@ use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
 use lemi_eval::{evaluate_bundle, EvalOptions, EvalRun, ViewpointSet};
 use lemi_gpu::Gpu;
-
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
+use lemi_testkit::gpu;
 
 const W: u32 = 256;
 const H: u32 = 144;

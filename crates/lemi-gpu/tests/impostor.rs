@@ -14,11 +14,7 @@ use lemi_gpu::{
     Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions,
     Renderer, UploadOptions,
 };
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
+use lemi_testkit::gpu;
 
 /// A 64×64, 90° camera at `eye` looking along −Z: a point at view depth `d` and offset `(x, y)`
 /// from the axis lands at pixel `(32 + 32·x/d, 32 − 32·y/d)`.

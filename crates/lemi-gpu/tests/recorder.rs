@@ -12,11 +12,7 @@ use lemi_gpu::{
     Gpu, GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RenderOptions,
     Renderer, UploadOptions,
 };
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
+use lemi_testkit::gpu;
 
 fn white_materials(gpu: &Gpu) -> GpuMaterials {
     let m = Material {

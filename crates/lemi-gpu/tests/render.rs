@@ -7,11 +7,7 @@ use lemi_core::camera::Camera;
 use lemi_core::{Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
 use lemi_gpu::shading::{linear_to_srgb, srgb_to_linear};
 use lemi_gpu::{Frame, Gpu, GpuScene, Lighting, RenderOptions, Renderer, UploadOptions};
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
+use lemi_testkit::gpu;
 
 fn vertex(p: [f32; 3], uv: [f32; 2], color: [u8; 4]) -> Vertex {
     Vertex::new(p, [0.0, 0.0, 1.0], uv, color)

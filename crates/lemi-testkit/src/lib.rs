@@ -1,0 +1,244 @@
+//! What lemi's test suites share (a dev-only crate): the GPU-or-skip helper, skips that show in
+//! the test run's output, one GPU test at a time, box scenes, small bake parameters, a two-cell
+//! grid at eye height and baking it into a bundle.
+//!
+//! **Skips are visible.** The test harness captures what a passing test prints, so a test that
+//! returns early with `eprintln!` passes silently. [`skip`] writes straight to the process's
+//! standard error (which the harness does not capture), so every skip shows in `cargo test`'s
+//! output as `SKIPPED <test>: <reason>`, and, when `LEMI_SKIP_LOG` names a file, appends the same
+//! line to it (CI prints the count at the end of the run).
+
+use std::io::Write;
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard};
+
+use glam::DVec3;
+use lemi_bake::{run, BakeJob, Baker};
+use lemi_core::bundle::{BakeParams, LayerTarget, Layering, SceneRef};
+use lemi_core::cell::CellGrid;
+use lemi_core::{Aabb, Face, Mesh, Scene, SceneBuilder, Vertex};
+use lemi_gpu::{BackendChoice, Gpu};
+
+/// Says that the running test is skipped and why, where the test run's output shows it.
+pub fn skip(reason: &str) {
+    let thread = std::thread::current();
+    let line = format!("SKIPPED {}: {reason}\n", thread.name().unwrap_or("a test"));
+    let _ = std::io::stderr().write_all(line.as_bytes());
+    if let Some(log) = std::env::var_os("LEMI_SKIP_LOG") {
+        if let Ok(mut f) = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(log)
+        {
+            let _ = f.write_all(line.as_bytes());
+        }
+    }
+}
+
+/// The adapter, or `None` after a visible [`skip`] when there is none and
+/// `LEMI_SKIP_GPU_TESTS=1` (without it, a machine with no adapter fails with the install hint).
+pub fn gpu() -> Option<Gpu> {
+    match Gpu::new(BackendChoice::Auto) {
+        Ok(g) => Some(g),
+        Err(e) if std::env::var("LEMI_SKIP_GPU_TESTS").as_deref() == Ok("1") => {
+            skip(&format!("no GPU adapter (LEMI_SKIP_GPU_TESTS=1): {e}"));
+            None
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// `Some(path)` when the file exists; otherwise a visible [`skip`] naming it and `None`.
+pub fn require_file(path: &Path, how_to_get_it: &str) -> Option<std::path::PathBuf> {
+    if path.is_file() {
+        Some(path.to_path_buf())
+    } else {
+        skip(&format!("{} not found ({how_to_get_it})", path.display()));
+        None
+    }
+}
+
+/// GPU tests share two cores (and some pace frames in real time): one at a time.
+pub fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The sides of the box `[min, max]`: outward normal and four corners counter-clockwise seen from
+/// outside, in the order +X, −X, +Y, −Y, +Z, −Z; without the bottom (−Y) unless `bottom`.
+pub fn box_sides(min: [f32; 3], max: [f32; 3], bottom: bool) -> Vec<([f32; 3], [[f32; 3]; 4])> {
+    let [x0, y0, z0] = min;
+    let [x1, y1, z1] = max;
+    let mut sides = vec![
+        (
+            [1.0, 0.0, 0.0],
+            [[x1, y0, z0], [x1, y1, z0], [x1, y1, z1], [x1, y0, z1]],
+        ),
+        (
+            [-1.0, 0.0, 0.0],
+            [[x0, y0, z1], [x0, y1, z1], [x0, y1, z0], [x0, y0, z0]],
+        ),
+        (
+            [0.0, 1.0, 0.0],
+            [[x0, y1, z0], [x0, y1, z1], [x1, y1, z1], [x1, y1, z0]],
+        ),
+        (
+            [0.0, -1.0, 0.0],
+            [[x0, y0, z0], [x1, y0, z0], [x1, y0, z1], [x0, y0, z1]],
+        ),
+        (
+            [0.0, 0.0, 1.0],
+            [[x1, y0, z1], [x1, y1, z1], [x0, y1, z1], [x0, y0, z1]],
+        ),
+        (
+            [0.0, 0.0, -1.0],
+            [[x0, y0, z0], [x0, y1, z0], [x1, y1, z0], [x1, y0, z0]],
+        ),
+    ];
+    if !bottom {
+        sides.remove(3);
+    }
+    sides
+}
+
+/// Appends quads to `mesh`: per quad four vertices with the texture coordinates `uvs` and two
+/// triangles `0 1 2, 0 2 3`; `color(normal)` gives each quad's vertex colour.
+pub fn push_quads(
+    mesh: &mut Mesh,
+    quads: &[([f32; 3], [[f32; 3]; 4])],
+    uvs: [[f32; 2]; 4],
+    color: impl Fn([f32; 3]) -> [u8; 4],
+) {
+    for &(n, corners) in quads {
+        let base = mesh.vertices.len() as u32;
+        for (c, uv) in corners.iter().zip(uvs) {
+            mesh.vertices.push(Vertex::new(*c, n, uv, color(n)));
+        }
+        mesh.indices
+            .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+}
+
+/// Texture coordinates of an untextured quad.
+pub const NO_UV: [[f32; 2]; 4] = [[0.0; 2]; 4];
+/// Texture coordinates spanning the texture once.
+pub const UNIT_UV: [[f32; 2]; 4] = [[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]];
+
+/// A box standing on the ground (no bottom face), one colour, as a mesh of its own.
+pub fn add_box(b: &mut SceneBuilder, material: u32, min: [f32; 3], max: [f32; 3], color: [u8; 4]) {
+    let mut mesh = Mesh {
+        material,
+        ..Default::default()
+    };
+    push_quads(&mut mesh, &box_sides(min, max, false), NO_UV, |_| color);
+    b.add_mesh(mesh);
+}
+
+/// A closed box (6 faces, each with the texture once), one colour, as a mesh of its own.
+pub fn add_closed_box(
+    b: &mut SceneBuilder,
+    material: u32,
+    min: [f32; 3],
+    max: [f32; 3],
+    color: [u8; 4],
+) {
+    let mut mesh = Mesh {
+        material,
+        ..Default::default()
+    };
+    push_quads(&mut mesh, &box_sides(min, max, true), UNIT_UV, |_| color);
+    b.add_mesh(mesh);
+}
+
+/// A flat ground at y = 0 of `n × n` square tiles of side `tile` from `(origin, origin)`, as one
+/// mesh; `color(i, j)` gives tile `(i, j)`'s colour.
+pub fn add_ground(
+    b: &mut SceneBuilder,
+    material: u32,
+    origin: f32,
+    tile: f32,
+    n: usize,
+    color: impl Fn(usize, usize) -> [u8; 4],
+) {
+    let mut mesh = Mesh {
+        material,
+        ..Default::default()
+    };
+    for j in 0..n {
+        for i in 0..n {
+            let (x0, z0) = (origin + tile * i as f32, origin + tile * j as f32);
+            let corners = [
+                [x0, 0.0, z0],
+                [x0, 0.0, z0 + tile],
+                [x0 + tile, 0.0, z0 + tile],
+                [x0 + tile, 0.0, z0],
+            ];
+            let c = color(i, j);
+            push_quads(&mut mesh, &[([0.0, 1.0, 0.0], corners)], NO_UV, |_| c);
+        }
+    }
+    b.add_mesh(mesh);
+}
+
+/// Small bake parameters for tests: 10 m cubic cells, the four horizontal faces, α = 0.03 rad,
+/// an 8-texel micro-grid with threshold 0.6, the optimal layering.
+pub fn small_params(resolution: u32, target: LayerTarget) -> BakeParams {
+    BakeParams {
+        cell_size: 10.0,
+        cell_height: None,
+        resolution,
+        target,
+        faces: Face::HORIZONTAL.to_vec(),
+        alpha: 0.03,
+        output_fov_deg: None,
+        output_width: None,
+        micro_grid: 8,
+        micro_threshold: 0.6,
+        layering: Layering::Optimal,
+    }
+}
+
+/// Eye height of the test cells (m).
+pub const EYE: f64 = 1.7;
+
+/// `n` 10 m cells at eye height along +X from x = −10 (`0_0_0`, `1_0_0`, …).
+pub fn row_of_cells(n: usize) -> CellGrid {
+    let x1 = -10.0 + 10.0 * n as f64;
+    let region = Aabb::new(DVec3::new(-10.0, EYE, -5.0), DVec3::new(x1, EYE, 5.0));
+    match CellGrid::tile(region, 10.0) {
+        Ok(g) => g,
+        Err(e) => panic!("a row of {n} cells: {e}"),
+    }
+}
+
+/// Bakes every cell of `grid` of `scene` with `params` into `bundle`; `name` stands for the
+/// scene's source and fingerprint.
+pub fn bake_grid(
+    gpu: &Gpu,
+    scene: &Scene,
+    params: &BakeParams,
+    grid: &CellGrid,
+    bundle: &Path,
+    name: &str,
+) {
+    let job = BakeJob {
+        bundle: bundle.to_path_buf(),
+        scene: SceneRef {
+            sources: vec![format!("test:{name}")],
+            up: "y".into(),
+            fingerprint: format!("fingerprint-of-the-{name}-scene"),
+            triangles: scene.triangle_count(),
+        },
+        params: params.clone(),
+        grid: grid.clone(),
+        cells: grid.cells(),
+        shard: None,
+    };
+    let baker = match Baker::new(gpu, scene, params.clone()) {
+        Ok(b) => b,
+        Err(e) => panic!("baker: {e}"),
+    };
+    if let Err(e) = run(&job, |c| baker.bake(c, |_| {}), |_, _, _| {}) {
+        panic!("baking the {name} scene: {e}");
+    }
+}
