@@ -187,55 +187,70 @@ impl Default for DynamicOptions {
 }
 
 impl DynamicOptions {
-    /// Checks the options; the error names the option, its value and what it must be.
+    /// Checks the options; the error ([`StrategyError::BadOption`]) names the option, its value
+    /// and what it must be.
     pub fn validate(&self) -> Result<(), StrategyError> {
-        let bad = |m: String| Err(StrategyError::Invalid(format!("dynamic strategy: {m}")));
+        let bad = |option: &'static str, message: String| {
+            Err(StrategyError::BadOption {
+                strategy: StrategyKind::Dynamic,
+                option,
+                message,
+            })
+        };
         if !(self.object_size.is_finite() && self.object_size > 0.0) {
-            return bad(format!(
-                "object_size must be a finite length > 0 m (got {})",
-                self.object_size
-            ));
+            return bad(
+                "object_size",
+                format!("must be a finite length > 0 m (got {})", self.object_size),
+            );
         }
         if let Some(b) = self.beta_scr {
             if !(b.is_finite() && b > 0.0 && b < std::f64::consts::FRAC_PI_2) {
-                return bad(format!(
-                    "beta_scr must be an angle in (0, π/2) radians (got {b})"
-                ));
+                return bad(
+                    "beta_scr",
+                    format!("must be an angle in (0, π/2) radians (got {b})"),
+                );
             }
         }
         if !(self.beta_factor.is_finite() && self.beta_factor > 0.0) {
-            return bad(format!(
-                "beta_factor must be finite and > 0 (got {})",
-                self.beta_factor
-            ));
+            return bad(
+                "beta_factor",
+                format!("must be finite and > 0 (got {})", self.beta_factor),
+            );
         }
         for (name, v) in [
             ("min_resolution", self.min_resolution),
             ("max_resolution", self.max_resolution),
         ] {
             if v == 0 || !v.is_power_of_two() || v > MAX_TEXTURE_RESOLUTION {
-                return bad(format!(
-                    "{name} must be a power of two in 1..={MAX_TEXTURE_RESOLUTION} (got {v})"
-                ));
+                return bad(
+                    name,
+                    format!("must be a power of two in 1..={MAX_TEXTURE_RESOLUTION} (got {v})"),
+                );
             }
         }
         if self.min_resolution > self.max_resolution {
-            return bad(format!(
-                "min_resolution ({}) must not exceed max_resolution ({})",
-                self.min_resolution, self.max_resolution
-            ));
+            return bad(
+                "min_resolution",
+                format!(
+                    "({}) must not exceed max_resolution ({})",
+                    self.min_resolution, self.max_resolution
+                ),
+            );
         }
         if !(self.min_distance_radii.is_finite() && self.min_distance_radii > 1.0) {
-            return bad(format!(
-                "min_distance_radii must be finite and > 1 (the eye must stay outside an object's bounding sphere; got {})",
-                self.min_distance_radii
-            ));
+            return bad(
+                "min_distance_radii",
+                format!(
+                    "must be finite and > 1 (the eye must stay outside an object's bounding sphere; got {})",
+                    self.min_distance_radii
+                ),
+            );
         }
         if self.dilate_texels > 4 {
-            return bad(format!(
-                "dilate_texels must be 0..=4 (got {})",
-                self.dilate_texels
-            ));
+            return bad(
+                "dilate_texels",
+                format!("must be 0..=4 (got {})", self.dilate_texels),
+            );
         }
         Ok(())
     }
@@ -343,8 +358,7 @@ pub struct DynamicStrategy {
 
 impl DynamicStrategy {
     /// Groups the scene of `ctx` into objects (see the module docs); the bundle of `ctx` gives
-    /// the view cells and their near lists. Bad options are [`StrategyError::Invalid`] naming the
-    /// option.
+    /// the view cells and their near lists. Bad options are [`StrategyError::BadOption`].
     pub fn new(
         ctx: &StrategyContext,
         options: DynamicOptions,
@@ -352,10 +366,14 @@ impl DynamicStrategy {
         options.validate()?;
         let max_dim = ctx.gpu.limits().max_texture_dimension_2d;
         if options.max_resolution > max_dim {
-            return Err(StrategyError::Invalid(format!(
-                "dynamic strategy: max_resolution {} is larger than this adapter's textures ({max_dim} per side)",
-                options.max_resolution
-            )));
+            return Err(StrategyError::BadOption {
+                strategy: StrategyKind::Dynamic,
+                option: "max_resolution",
+                message: format!(
+                    "({}) is larger than this adapter's textures ({max_dim} per side)",
+                    options.max_resolution
+                ),
+            });
         }
         let base = base_objects(&ctx.scene, options.object_size);
         Ok(DynamicStrategy {
@@ -878,5 +896,35 @@ impl Strategy for DynamicStrategy {
         };
         r.texture_bytes_per_cell = if n > 0 { sum as f64 / n as f64 } else { 0.0 };
         r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_options_name_the_option_as_a_field() {
+        let e = DynamicOptions {
+            dilate_texels: 9,
+            ..Default::default()
+        }
+        .validate()
+        .expect_err("refused");
+        assert!(
+            matches!(
+                &e,
+                StrategyError::BadOption {
+                    strategy: StrategyKind::Dynamic,
+                    option: "dilate_texels",
+                    message,
+                } if message == "must be 0..=4 (got 9)"
+            ),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "dynamic option `dilate_texels` must be 0..=4 (got 9)"
+        );
     }
 }
