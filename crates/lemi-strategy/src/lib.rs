@@ -93,6 +93,15 @@ pub enum StrategyError {
         "unknown strategy `{0}`: the strategies are lemi, cubemap, equidistant, warp, dynamic"
     )]
     UnknownStrategy(String),
+    /// An option of a strategy is out of range: the strategy, the option (its field name in the
+    /// strategy's options struct, so that a front end can name its own flag or key) and what is
+    /// wrong, with the value (e.g. `must be 0..=4 (got 9)`).
+    #[error("{strategy} option `{option}` {message}")]
+    BadOption {
+        strategy: StrategyKind,
+        option: &'static str,
+        message: String,
+    },
     #[error("{0}")]
     Invalid(String),
     #[error(transparent)]

@@ -173,30 +173,42 @@ impl Default for WarpOptions {
 impl WarpOptions {
     /// Checks the options; the error names the option, the accepted range and the value.
     pub fn validate(&self) -> Result<(), StrategyError> {
+        let bad = |option: &'static str, message: String| StrategyError::BadOption {
+            strategy: StrategyKind::Warp,
+            option,
+            message,
+        };
         if !(self.border.is_finite() && (0.0..=MAX_BORDER).contains(&self.border)) {
-            return Err(StrategyError::Invalid(format!(
-                "warp option `border` must be a number in [0, {MAX_BORDER}] (the fraction of the face \
-                 width added to each recorded face; 0.2, the report's 1/5, is the default), got {}",
-                self.border
-            )));
+            return Err(bad(
+                "border",
+                format!(
+                    "must be a number in [0, {MAX_BORDER}] (the fraction of the face \
+                     width added to each recorded face; 0.2, the report's 1/5, is the default), got {}",
+                    self.border
+                ),
+            ));
         }
         if self.cache_cells == 0 || self.cache_cells > 4096 {
-            return Err(StrategyError::Invalid(format!(
-                "warp option `cache_cells` must be 1..=4096 (cells whose recordings are kept), got {}",
-                self.cache_cells
-            )));
+            return Err(bad(
+                "cache_cells",
+                format!(
+                    "must be 1..=4096 (cells whose recordings are kept), got {}",
+                    self.cache_cells
+                ),
+            ));
         }
         if let Some(r) = self.resolution {
             if !(8..=4096).contains(&r) {
-                return Err(StrategyError::Invalid(format!(
-                    "warp option `resolution` must be 8..=4096 pixels per recorded face side, got {r}"
-                )));
+                return Err(bad(
+                    "resolution",
+                    format!("must be 8..=4096 pixels per recorded face side, got {r}"),
+                ));
             }
         }
         if self.max_outline_span == Some(0) {
-            return Err(StrategyError::Invalid(
-                "warp option `max_outline_span` must be at least 1 pixel (or unset for no limit), got 0"
-                    .into(),
+            return Err(bad(
+                "max_outline_span",
+                "must be at least 1 pixel (or unset for no limit), got 0".into(),
             ));
         }
         Ok(())

@@ -1,8 +1,8 @@
 //! The eval report: the data model ([`ViewResult`] → [`CellResult`] → [`BundleResult`], sharing the
 //! [`Aggregate`] totals), the one-line [`verdict`], the bounded [`WorstSet`] of views to show, and
-//! [`write_report`], which writes `report.json` (serde) and a static, self-contained `index.html`:
-//! inline CSS and inline SVG histograms (hand-written, no plotting dependency), images as PNG files
-//! beside it, no network access. Every file is written atomically
+//! [`write_report`], which writes `report.json` (serde) and a static, self-contained `index.html`
+//! (a `maud` template, every text escaped): inline CSS and inline SVG histograms (drawn with
+//! `plotters`), images as PNG files beside it, no network access. Every file is written atomically
 //! ([`lemi_core::container::write_atomic`]: temporary file in the same directory + rename).
 //!
 //! Aggregation rules: pixel-error statistics merge exactly ([`PixelErrorStats::merge`]); crack pixels
@@ -14,7 +14,6 @@
 
 use std::cmp::Ordering;
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use lemi_gpu::Frame;
@@ -23,6 +22,8 @@ use serde::{Deserialize, Serialize};
 use crate::image_metrics::{check_frame, mse_from_psnr, psnr_from_mse};
 use crate::stats::{Histogram, PixelErrorStats};
 use crate::EvalError;
+
+mod html;
 
 /// How many worst views a [`CellResult`] lists.
 pub const WORST_PER_CELL: usize = 3;
@@ -457,174 +458,6 @@ fn worst_view_png(w: &WorstView) -> Result<Option<Vec<u8>>, EvalError> {
     Ok(Some(png))
 }
 
-fn esc(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
-}
-
-/// An inline SVG bar chart of `h` (log-scaled counts), with the 1 px threshold marked.
-fn histogram_svg(h: &Histogram, title: &str, width: u32, height: u32) -> String {
-    let (ml, mr, mt, mb) = (8.0, 8.0, 18.0, 18.0);
-    let (w, hh) = (width as f64, height as f64);
-    let plot_w = w - ml - mr;
-    let plot_h = hh - mt - mb;
-    let bars = h.counts.len() + 1; // + overflow
-    let bw = plot_w / bars as f64;
-    let scale = |c: u64| (1.0 + c as f64).log10();
-    let top = h
-        .counts
-        .iter()
-        .chain(std::iter::once(&h.overflow))
-        .map(|&c| scale(c))
-        .fold(0.0f64, f64::max)
-        .max(1e-9);
-    let mut s = String::new();
-    let _ = write!(
-        s,
-        r##"<svg xmlns="http://www.w3.org/2000/svg" class="hist" width="{width}" height="{height}" viewBox="0 0 {width} {height}" role="img"><title>{t}</title><rect x="0" y="0" width="{width}" height="{height}" fill="#fff"/><text x="{ml}" y="12" font-size="11">{t} (log count, total {total})</text>"##,
-        t = esc(title),
-        total = h.total()
-    );
-    for (k, &c) in h
-        .counts
-        .iter()
-        .chain(std::iter::once(&h.overflow))
-        .enumerate()
-    {
-        if c == 0 {
-            continue;
-        }
-        let bh = plot_h * scale(c) / top;
-        let x = ml + k as f64 * bw;
-        let y = mt + plot_h - bh;
-        let lo = k as f32 * h.bin_width_px;
-        let fill = if k == h.counts.len() {
-            "#b22"
-        } else if lo >= 1.0 {
-            "#d73"
-        } else {
-            "#36a"
-        };
-        let tip = if k == h.counts.len() {
-            format!("≥ {:.2} px: {c}", h.range_px())
-        } else {
-            format!("{:.2}–{:.2} px: {c}", lo, lo + h.bin_width_px)
-        };
-        let _ = write!(
-            s,
-            r#"<rect x="{x:.1}" y="{y:.1}" width="{:.1}" height="{bh:.1}" fill="{fill}"><title>{tip}</title></rect>"#,
-            (bw - 0.5).max(0.5)
-        );
-    }
-    // 1 px line and axis labels.
-    let px_to_x = |px: f32| ml + (px / h.bin_width_px) as f64 * bw;
-    let base = mt + plot_h;
-    let _ = write!(
-        s,
-        r##"<line x1="{ml}" y1="{base:.1}" x2="{:.1}" y2="{base:.1}" stroke="#333"/>"##,
-        ml + plot_w
-    );
-    if h.range_px() > 1.0 {
-        let x1 = px_to_x(1.0);
-        let _ = write!(
-            s,
-            r##"<line x1="{x1:.1}" y1="{mt}" x2="{x1:.1}" y2="{base:.1}" stroke="#c00" stroke-dasharray="3,2"/>"##
-        );
-    }
-    let mut px = 0.0f32;
-    while px < h.range_px() - 1e-3 {
-        let _ = write!(
-            s,
-            r#"<text x="{:.1}" y="{:.1}" font-size="10" text-anchor="{}">{px}</text>"#,
-            px_to_x(px),
-            hh - 5.0,
-            if px == 0.0 { "start" } else { "middle" }
-        );
-        px += 1.0;
-    }
-    let _ = write!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" font-size="10" text-anchor="end">≥{}</text></svg>"#,
-        w - 2.0,
-        hh - 5.0,
-        h.range_px()
-    );
-    s
-}
-
-const CSS: &str = "body{font-family:system-ui,sans-serif;margin:1.5em;color:#222}\
-h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em}\
-.verdict{font-size:1.15em;font-weight:600;padding:.6em .8em;background:#eef3fb;border-left:4px solid #36a}\
-.verdict.bad{background:#fbeeee;border-color:#b22}\
-table{border-collapse:collapse;font-size:.9em}td,th{border:1px solid #ccc;padding:.2em .5em;text-align:right}\
-th{background:#f4f4f4}td.l,th.l{text-align:left}tr.bad td{background:#fdecec}\
-figure{margin:1em 0}figure img{max-width:100%;image-rendering:pixelated;border:1px solid #ccc}\
-.cellhist{display:inline-block;margin:.3em}.note{color:#666;font-size:.85em}";
-
-fn aggregate_cells(a: &Aggregate) -> String {
-    format!(
-        "<td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>",
-        a.views,
-        fmt_num(a.max_error_px as f64, 3),
-        fmt_num(a.p99_error_px as f64, 3),
-        fmt_num(a.mean_error_px, 3),
-        fmt_num(100.0 * a.above_1px, 3),
-        a.crack_pixels,
-        a.views_with_cracks,
-        fmt_num(a.mean_flip as f64, 4),
-        fmt_num(a.max_flip as f64, 4),
-        fmt_num(a.coverage, 4),
-        fmt_num(a.min_coverage, 4),
-        fmt_num(a.psnr, 2),
-        fmt_num(a.ssim, 4),
-    )
-}
-
-const AGGREGATE_HEADER: &str = "<th>views</th><th>max px</th><th>p99 px</th><th>mean px</th><th>&gt;1 px %</th><th>crack px</th><th>views w/ cracks</th><th>mean FLIP</th><th>max FLIP</th><th>coverage</th><th>min cov.</th><th>PSNR dB</th><th>SSIM</th>";
-
-fn is_bad(a: &Aggregate) -> bool {
-    a.crack_pixels > 0 || a.max_error_px > 1.0
-}
-
-fn views_table(views: &[ViewResult]) -> String {
-    let mut s = String::from(
-        "<table><tr><th class=\"l\">cell</th><th class=\"l\">viewpoint</th><th class=\"l\">eye</th><th class=\"l\">dir</th><th>max px</th><th>p99 px</th><th>mean px</th><th>crack px</th><th>FLIP</th><th>PSNR dB</th><th>SSIM</th><th>coverage</th></tr>",
-    );
-    let v3 = |v: &[f64; 3]| format!("{:.3}, {:.3}, {:.3}", v[0], v[1], v[2]);
-    for v in views {
-        let bad = v.crack_pixels > 0 || v.error.max > 1.0;
-        let _ = write!(
-            s,
-            "<tr{}><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-            if bad { " class=\"bad\"" } else { "" },
-            esc(&v.cell),
-            esc(&v.viewpoint),
-            v3(&v.eye),
-            v3(&v.dir),
-            fmt_num(v.error.max as f64, 3),
-            fmt_num(v.error.p99 as f64, 3),
-            fmt_num(v.error.mean, 3),
-            v.crack_pixels,
-            fmt_num(v.mean_flip as f64, 4),
-            fmt_num(v.psnr, 2),
-            fmt_num(v.ssim, 4),
-            fmt_num(v.coverage, 4),
-        );
-    }
-    s.push_str("</table>");
-    s
-}
-
 /// Writes `report.json`, one `worst-NN.png` per entry of `worst` (reference | impostor | FLIP heat
 /// map) and `index.html` into `dir` (created if missing), each atomically; returns the path of
 /// `index.html`. The HTML references only those files, by relative name.
@@ -641,103 +474,26 @@ pub fn write_report(
     })?;
     write_file(&dir.join("report.json"), &json)?;
 
-    let mut figures = String::new();
+    let mut figures = Vec::with_capacity(worst.len());
     for (k, w) in worst.iter().enumerate() {
-        let name = format!("worst-{k:02}.png");
-        match worst_view_png(w)? {
+        let file = match worst_view_png(w)? {
             Some(png) => {
+                let name = format!("worst-{k:02}.png");
                 write_file(&dir.join(&name), &png)?;
-                let _ = write!(
-                    figures,
-                    "<figure><img src=\"{name}\" alt=\"{l}: reference, impostor, FLIP\" loading=\"lazy\"><figcaption>{l} — reference | impostor | FLIP heat map ({}×{})</figcaption></figure>",
-                    w.reference.width,
-                    w.reference.height,
-                    l = esc(&w.label),
-                );
+                Some(name)
             }
-            None => {
-                let _ = write!(figures, "<p>{} — empty frame</p>", esc(&w.label));
-            }
-        }
+            None => None,
+        };
+        figures.push(html::Figure {
+            file,
+            label: &w.label,
+            width: w.reference.width,
+            height: w.reference.height,
+        });
     }
-
-    let s = &result.summary;
-    let mut html = String::new();
-    let _ = write!(
-        html,
-        "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>lemi eval report</title><style>{CSS}</style></head><body><h1>lemi eval report</h1><p class=\"verdict{}\" id=\"verdict\">{}</p>",
-        if is_bad(s) { " bad" } else { "" },
-        esc(&verdict(result))
-    );
-    if !result.info.is_empty() {
-        html.push_str("<table>");
-        for (k, v) in &result.info {
-            let _ = write!(
-                html,
-                "<tr><th class=\"l\">{}</th><td class=\"l\">{}</td></tr>",
-                esc(k),
-                esc(v)
-            );
-        }
-        html.push_str("</table>");
-    }
-    let _ = write!(
-        html,
-        "<h2>Bundle</h2><table><tr><th class=\"l\">scope</th>{AGGREGATE_HEADER}</tr><tr{}><td class=\"l\">bundle ({} cells)</td>{}</tr></table>",
-        if is_bad(s) { " class=\"bad\"" } else { "" },
-        result.cells.len(),
-        aggregate_cells(s)
-    );
-    let _ = write!(
-        html,
-        "<h2>Pixel error, bundle</h2>{}<p class=\"note\">Geometric error per pixel in output pixels, 0.05 px bins, last bar ≥ {} px; dashed line: 1 px. p99 is an upper bound, at most 1/320 px above the exact value (below 8 px).</p>",
-        histogram_svg(&s.histogram, "pixel error, bundle", 720, 220),
-        s.histogram.range_px()
-    );
-    let _ = write!(
-        html,
-        "<h2>Cells</h2><table id=\"cells\"><tr><th class=\"l\">cell</th>{AGGREGATE_HEADER}</tr>"
-    );
-    for (k, c) in result.cells.iter().enumerate() {
-        let _ = write!(
-            html,
-            "<tr id=\"cell-{k}\"{}><td class=\"l\">{}</td>{}</tr>",
-            if is_bad(&c.summary) {
-                " class=\"bad\""
-            } else {
-                ""
-            },
-            esc(&c.cell),
-            aggregate_cells(&c.summary)
-        );
-    }
-    html.push_str("</table>");
-    if !result.worst_views.is_empty() {
-        let _ = write!(
-            html,
-            "<h2>Worst views</h2><p class=\"note\">Ordered by crack pixels, then max error, then p99, then FLIP.</p>{}",
-            views_table(&result.worst_views)
-        );
-    }
-    if !figures.is_empty() {
-        let _ = write!(html, "<h2>Worst views: images</h2>{figures}");
-    }
-    if !result.cells.is_empty() {
-        html.push_str("<h2>Pixel error per cell</h2><details open><summary>histograms</summary>");
-        for c in &result.cells {
-            let _ = write!(
-                html,
-                "<div class=\"cellhist\">{}</div>",
-                histogram_svg(&c.summary.histogram, &c.cell, 360, 130)
-            );
-        }
-        html.push_str("</details>");
-    }
-    html.push_str(
-        "<p class=\"note\">All numbers: <a href=\"report.json\">report.json</a>.</p></body></html>\n",
-    );
+    let page = html::index_html(result, &figures)?;
     let index = dir.join("index.html");
-    write_file(&index, html.as_bytes())?;
+    write_file(&index, page.as_bytes())?;
     Ok(index)
 }
 
@@ -820,10 +576,5 @@ mod tests {
         b.psnr = psnr_from_mse(2.0);
         let agg = Aggregate::of([&a, &b], &PixelErrorStats::new());
         assert!((agg.psnr - psnr_from_mse(1.0)).abs() < 1e-9);
-    }
-
-    #[test]
-    fn html_escapes() {
-        assert_eq!(esc("<a&\"'>"), "&lt;a&amp;&quot;&#39;&gt;");
     }
 }
