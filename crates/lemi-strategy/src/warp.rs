@@ -906,7 +906,7 @@ impl WarpStrategy {
                 });
             }
             CellRecording {
-                id: id.clone(),
+                id,
                 center: cell.center,
                 half_extent,
                 faces,

@@ -7,6 +7,7 @@
 use std::collections::{HashMap, HashSet};
 
 use glam::DVec3;
+use lemi_core::classify::TriRef;
 use lemi_core::{Aabb, Mesh, Scene};
 use lemi_gpu::GpuScene;
 
@@ -258,41 +259,22 @@ fn boxes_overlap(a: &Aabb, b: &Aabb, eps: f64) -> bool {
     (a.min - eps).cmple(b.max).all() && (b.min - eps).cmple(a.max).all()
 }
 
-/// Copies triangles out of the scene, one mesh per source mesh (re-indexed).
+/// Copies triangles out of the scene ([`Scene::extract`]), one mesh per source mesh (re-indexed),
+/// in scene order; entries naming no triangle of the scene are left out.
 pub(super) fn extract_meshes(scene: &Scene, tris: &[[u32; 2]]) -> Vec<Mesh> {
-    let mut order = tris.to_vec();
-    order.sort_unstable();
-    let mut out = Vec::new();
-    for group in order.chunk_by(|a, b| a[0] == b[0]) {
-        let Some(src) = scene.meshes.get(group[0][0] as usize) else {
-            continue;
-        };
-        let mut remap: HashMap<u32, u32> = HashMap::new();
-        let mut mesh = Mesh {
-            material: src.material,
-            vertices: Vec::new(),
-            indices: Vec::with_capacity(3 * group.len()),
-        };
-        for &[_, t] in group {
-            let Some(idx) = src.indices.get(3 * t as usize..3 * t as usize + 3) else {
-                continue;
-            };
-            if idx.iter().any(|&i| i as usize >= src.vertices.len()) {
-                continue;
-            }
-            for &i in idx {
-                let n = *remap.entry(i).or_insert_with(|| {
-                    mesh.vertices.push(src.vertices[i as usize]);
-                    mesh.vertices.len() as u32 - 1
-                });
-                mesh.indices.push(n);
-            }
-        }
-        if !mesh.indices.is_empty() {
-            out.push(mesh);
-        }
-    }
-    out
+    let mut refs: Vec<TriRef> = tris
+        .iter()
+        .map(|&p| TriRef::from(p))
+        .filter(|r| {
+            scene
+                .meshes
+                .get(r.mesh as usize)
+                .is_some_and(|m| (r.tri as usize) < m.triangle_count())
+        })
+        .collect();
+    refs.sort_unstable();
+    // every entry names a triangle of the scene (checked above), so this cannot fail
+    scene.extract(&refs).unwrap_or_default()
 }
 
 #[cfg(test)]
