@@ -21,11 +21,13 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{cell_file_name, BakeParams, Bundle, CellFile, Manifest, SceneRef};
+use lemi_core::bundle::{
+    cell_file_name, BakeParams, Bundle, CellFile, LayerTarget, Manifest, SceneRef,
+};
 use lemi_core::camera::Camera;
 use lemi_core::cell::CellGrid;
 use lemi_core::cell::CellId;
-use lemi_core::{Aabb, Face, Material, Scene, SceneBuilder};
+use lemi_core::{Aabb, Scene, SceneBuilder};
 use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
 use lemi_runtime::{
     CellState, FrameState, LoaderOptions, RuntimeError, StallPolicy, Streamer, StreamerOptions,
@@ -35,21 +37,8 @@ use lemi_testkit::{add_box, gpu, serial};
 // ---------------------------------------------------------------------------------------------
 // fixtures
 
-/// Small parameters (built from JSON so that parameters added later with a default need no
-/// change here).
 fn params() -> BakeParams {
-    serde_json::from_value(serde_json::json!({
-        "cell_size": 10.0,
-        "resolution": 64,
-        "target": { "layers": 4 },
-        "faces": Face::HORIZONTAL,
-        "alpha": 0.03,
-        "output_fov_deg": null,
-        "output_width": null,
-        "micro_grid": 8,
-        "micro_threshold": 0.6,
-    }))
-    .expect("bake parameters")
+    lemi_testkit::small_params(64, LayerTarget::Layers(4))
 }
 
 /// A ground of 20 m tiles over ±400 m and boxes on both sides of the row of cells and beyond its
@@ -57,23 +46,9 @@ fn params() -> BakeParams {
 fn scene() -> Scene {
     let mut b = SceneBuilder::new();
     b.add_source("test:streaming");
-    let ground = b.add_material(Material {
-        name: "ground".into(),
-        base_color: [0.45, 0.55, 0.35, 1.0],
-        texture: None,
-    });
-    let wall = b.add_material(Material {
-        name: "wall".into(),
-        base_color: [0.8, 0.5, 0.4, 1.0],
-        texture: None,
-    });
-    lemi_testkit::add_ground(&mut b, ground, -400.0, 20.0, 40, |i, j| {
-        if (i + j) % 2 == 0 {
-            [255; 4]
-        } else {
-            [170, 190, 150, 255]
-        }
-    });
+    let ground = lemi_testkit::plain_material(&mut b, "ground", [0.45, 0.55, 0.35, 1.0]);
+    let wall = lemi_testkit::plain_material(&mut b, "wall", [0.8, 0.5, 0.4, 1.0]);
+    lemi_testkit::add_ground(&mut b, ground, -400.0, 20.0, 40, lemi_testkit::checker);
     let mut k = 0u32;
     for &d in &[12.0f32, 30.0, 60.0, 110.0, 200.0, 350.0] {
         for &x in &[-40.0f32, -15.0, 0.0, 15.0, 40.0] {

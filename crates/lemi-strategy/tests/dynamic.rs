@@ -31,10 +31,10 @@ mod common;
 use common::{add_box, serial, EYE};
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, Bundle, Manifest, SceneRef};
+use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, Manifest, SceneRef};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::CellGrid;
-use lemi_core::{Aabb, Face, Material, Mesh, Scene, SceneBuilder, Vertex};
+use lemi_core::{Aabb, Scene, SceneBuilder};
 use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::dynamic::{
     billboard_half_size, resolution_for_angle, texture_resolution, texture_resolution_exact,
@@ -46,18 +46,7 @@ use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, Stra
 // fixtures
 
 fn params() -> BakeParams {
-    serde_json::from_value(serde_json::json!({
-        "cell_size": 10.0,
-        "resolution": 64,
-        "target": { "near_field": 20.0 },
-        "faces": Face::HORIZONTAL,
-        "alpha": 0.03,
-        "output_fov_deg": null,
-        "output_width": null,
-        "micro_grid": 8,
-        "micro_threshold": 0.6,
-    }))
-    .expect("bake parameters")
+    lemi_testkit::small_params(64, LayerTarget::NearField(20.0))
 }
 
 /// A flat ground of 10 m tiles over ±120 m (one colour, so that only silhouettes differ) and
@@ -65,64 +54,27 @@ fn params() -> BakeParams {
 fn scene() -> Scene {
     let mut b = SceneBuilder::new();
     b.add_source("test:dynamic");
-    let ground = b.add_material(Material {
-        name: "ground".into(),
-        base_color: [0.45, 0.55, 0.35, 1.0],
-        texture: None,
-    });
-    let wall = b.add_material(Material {
-        name: "wall".into(),
-        base_color: [0.8, 0.6, 0.5, 1.0],
-        texture: None,
-    });
-    let mut mesh = Mesh {
-        material: ground,
-        ..Default::default()
-    };
-    let (tile, n) = (10.0f32, 24);
-    for j in 0..n {
-        for i in 0..n {
-            let (x0, z0) = (-120.0 + tile * i as f32, -120.0 + tile * j as f32);
-            let base = mesh.vertices.len() as u32;
-            for [x, z] in [
-                [x0, z0],
-                [x0, z0 + tile],
-                [x0 + tile, z0 + tile],
-                [x0 + tile, z0],
-            ] {
-                mesh.vertices.push(Vertex::new(
-                    [x, 0.0, z],
-                    [0.0, 1.0, 0.0],
-                    [0.0, 0.0],
-                    [255; 4],
-                ));
-            }
-            mesh.indices
-                .extend_from_slice(&[base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-    }
-    b.add_mesh(mesh);
-    for (m, &d) in [16.0f32, 26.0, 40.0, 62.0, 100.0].iter().enumerate() {
-        let count = 10 + 2 * m;
-        for a in 0..count {
-            let angle = (a as f32 + 0.5 * (m % 2) as f32) * std::f32::consts::TAU / count as f32;
-            let (cx, cz) = (d * angle.cos(), d * angle.sin());
-            let w = 1.0 + 0.03 * d;
-            let h = 3.0 + 0.12 * d + ((a + m) % 4) as f32 * 2.0;
-            let color = [
-                90 + (a * 15 % 160) as u8,
-                120 + (m * 30) as u8,
-                230 - (a * 25 % 150) as u8,
-                255,
-            ];
-            add_box(
-                &mut b,
-                wall,
-                [cx - w, 0.0, cz - w],
-                [cx + w, h, cz + w],
-                color,
-            );
-        }
+    let ground = lemi_testkit::plain_material(&mut b, "ground", [0.45, 0.55, 0.35, 1.0]);
+    let wall = lemi_testkit::plain_material(&mut b, "wall", [0.8, 0.6, 0.5, 1.0]);
+    lemi_testkit::add_ground(&mut b, ground, -120.0, 10.0, 24, |_, _| [255; 4]);
+    for (m, a, d, cx, cz) in
+        lemi_testkit::ring_positions(&[16.0f32, 26.0, 40.0, 62.0, 100.0], |m| 10 + 2 * m)
+    {
+        let w = 1.0 + 0.03 * d;
+        let h = 3.0 + 0.12 * d + ((a + m) % 4) as f32 * 2.0;
+        let color = [
+            90 + (a * 15 % 160) as u8,
+            120 + (m * 30) as u8,
+            230 - (a * 25 % 150) as u8,
+            255,
+        ];
+        add_box(
+            &mut b,
+            wall,
+            [cx - w, 0.0, cz - w],
+            [cx + w, h, cz + w],
+            color,
+        );
     }
     b.finish()
 }
@@ -145,7 +97,7 @@ fn fixture() -> Option<&'static Fixture> {
     static FIXTURE: OnceLock<Option<Fixture>> = OnceLock::new();
     FIXTURE
         .get_or_init(|| {
-            let gpu = Arc::new(Gpu::for_tests()?);
+            let gpu = Arc::new(lemi_testkit::gpu()?);
             let scene = scene();
             let dir = tempfile::tempdir().expect("temp dir");
             let bundle = dir.path().join("bundle");
@@ -736,7 +688,9 @@ fn bad_options_are_refused_with_clear_errors() {
 #[ignore]
 fn timings_on_a_city_walk() {
     let _serial = serial();
-    let Some(gpu) = Gpu::for_tests() else { return };
+    let Some(gpu) = lemi_testkit::gpu() else {
+        return;
+    };
     let gpu = Arc::new(gpu);
     let scene = lemi_scene::builtin::build("city:100k:1").expect("city");
     let dir = tempfile::tempdir().expect("temp dir");

@@ -23,10 +23,10 @@ mod common;
 
 use common::{add_box, grid, serial, EYE};
 use glam::DVec3;
-use lemi_core::bundle::{BakeParams, Bundle};
+use lemi_core::bundle::{BakeParams, Bundle, LayerTarget};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::ViewCell;
-use lemi_core::{Face, Material, Scene, SceneBuilder};
+use lemi_core::{Scene, SceneBuilder};
 use lemi_gpu::{Frame, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::warp::{HoleFilling, WarpOptions, WarpStrategy};
 use lemi_strategy::{FrameRequest, Strategy, StrategyContext, StrategyFrame, StrategyKind};
@@ -40,18 +40,7 @@ const OUT: u32 = 64;
 const FOV: f64 = 90.0;
 
 fn params() -> BakeParams {
-    serde_json::from_value(serde_json::json!({
-        "cell_size": 10.0,
-        "resolution": RES,
-        "target": { "near_field": 15.0 },
-        "faces": Face::HORIZONTAL,
-        "alpha": 0.03,
-        "output_fov_deg": null,
-        "output_width": null,
-        "micro_grid": 8,
-        "micro_threshold": 0.6,
-    }))
-    .expect("bake parameters")
+    lemi_testkit::small_params(RES, LayerTarget::NearField(15.0))
 }
 
 /// A ground of 40 m tiles over ±320 m, a few boxes close to the cells (near field) and rings of
@@ -59,23 +48,9 @@ fn params() -> BakeParams {
 fn scene() -> Scene {
     let mut b = SceneBuilder::new();
     b.add_source("test:warp");
-    let ground = b.add_material(Material {
-        name: "ground".into(),
-        base_color: [0.45, 0.55, 0.35, 1.0],
-        texture: None,
-    });
-    let wall = b.add_material(Material {
-        name: "wall".into(),
-        base_color: [0.8, 0.5, 0.4, 1.0],
-        texture: None,
-    });
-    lemi_testkit::add_ground(&mut b, ground, -320.0, 40.0, 16, |i, j| {
-        if (i + j) % 2 == 0 {
-            [255; 4]
-        } else {
-            [170, 190, 150, 255]
-        }
-    });
+    let ground = lemi_testkit::plain_material(&mut b, "ground", [0.45, 0.55, 0.35, 1.0]);
+    let wall = lemi_testkit::plain_material(&mut b, "wall", [0.8, 0.5, 0.4, 1.0]);
+    lemi_testkit::add_ground(&mut b, ground, -320.0, 40.0, 16, lemi_testkit::checker);
     // Close boxes beside the row of cells.
     for (k, &x) in [-12.0f32, 0.0, 12.0].iter().enumerate() {
         for side in [-1.0f32, 1.0] {
@@ -89,27 +64,24 @@ fn scene() -> Scene {
             );
         }
     }
-    for (m, &d) in [25.0f32, 45.0, 80.0, 140.0, 250.0].iter().enumerate() {
-        let count = 12 + 4 * m;
-        for a in 0..count {
-            let angle = (a as f32 + 0.5 * (m % 2) as f32) * std::f32::consts::TAU / count as f32;
-            let (cx, cz) = (d * angle.cos(), d * angle.sin());
-            let w = 1.5 + 0.03 * d;
-            let h = 4.0 + 0.12 * d + ((a + m) % 4) as f32 * 2.0;
-            let color = [
-                90 + (a * 13 % 150) as u8,
-                120 + (m * 25) as u8,
-                200 - (a * 7 % 100) as u8,
-                255,
-            ];
-            add_box(
-                &mut b,
-                wall,
-                [cx - w, 0.0, cz - w],
-                [cx + w, h, cz + w],
-                color,
-            );
-        }
+    for (m, a, d, cx, cz) in
+        lemi_testkit::ring_positions(&[25.0f32, 45.0, 80.0, 140.0, 250.0], |m| 12 + 4 * m)
+    {
+        let w = 1.5 + 0.03 * d;
+        let h = 4.0 + 0.12 * d + ((a + m) % 4) as f32 * 2.0;
+        let color = [
+            90 + (a * 13 % 150) as u8,
+            120 + (m * 25) as u8,
+            200 - (a * 7 % 100) as u8,
+            255,
+        ];
+        add_box(
+            &mut b,
+            wall,
+            [cx - w, 0.0, cz - w],
+            [cx + w, h, cz + w],
+            color,
+        );
     }
     b.finish()
 }

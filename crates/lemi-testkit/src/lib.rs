@@ -242,3 +242,39 @@ pub fn bake_grid(
         panic!("baking the {name} scene: {e}");
     }
 }
+
+/// Adds an untextured material of colour `rgba` (linear) and returns its index.
+pub fn plain_material(b: &mut SceneBuilder, name: &str, rgba: [f32; 4]) -> u32 {
+    b.add_material(lemi_core::Material {
+        name: name.into(),
+        base_color: rgba,
+        texture: None,
+    })
+}
+
+/// A checker of white and pale green tiles, for [`add_ground`].
+pub fn checker(i: usize, j: usize) -> [u8; 4] {
+    if (i + j) % 2 == 0 {
+        [255; 4]
+    } else {
+        [170, 190, 150, 255]
+    }
+}
+
+/// Positions on rings around the origin: ring `m` at distance `distances[m]` holds `count(m)`
+/// positions at equal angles (odd rings turned by half a step). Yields `(m, a, d, x, z)` for
+/// position `a` of ring `m`.
+pub fn ring_positions(
+    distances: &[f32],
+    count: impl Fn(usize) -> usize,
+) -> Vec<(usize, usize, f32, f32, f32)> {
+    let mut out = Vec::new();
+    for (m, &d) in distances.iter().enumerate() {
+        let n = count(m);
+        for a in 0..n {
+            let angle = (a as f32 + 0.5 * (m % 2) as f32) * std::f32::consts::TAU / n as f32;
+            out.push((m, a, d, d * angle.cos(), d * angle.sin()));
+        }
+    }
+    out
+}
