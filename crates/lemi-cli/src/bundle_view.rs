@@ -38,8 +38,10 @@ pub fn open(bundle: &Path, scene_override: &[String], quiet: bool) -> Result<(Bu
     })?;
     bundle.expect_scene(&fp).with_context(|| {
         format!(
-            "the scene {} cannot draw this bundle; pass the original scene with --scene, or bake again",
-            sources.join(" ")
+            "the scene {} is not the one {} was baked from; pass the original scene with --scene, \
+             or bake again",
+            sources.join(" "),
+            bundle.dir().display()
         )
     })?;
     let (scene, _) = load_scene(
