@@ -14,7 +14,7 @@
 //! and the command exits with status 1 at the end.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
@@ -22,7 +22,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use lemi_strategy::StrategyKind;
 use serde_json::{json, Value};
 
-use crate::walk::FrameRecord;
+use lemi_walk::FrameRecord;
 
 /// Run every far-field strategy on the same scene, cells, path and viewpoints; write tables and plots.
 #[derive(clap::Args)]
@@ -300,18 +300,18 @@ pub fn run(args: Args) -> Result<()> {
                     })?;
                     path_written = true;
                 }
-                let frames = read_frames(&walk_dir.join("frames.csv"))?;
+                let frames = lemi_walk::read_csv(&walk_dir.join("frames.csv"))?;
                 if geometry.is_none() {
                     geometry = Some(v.clone());
                     geometry_frames = frames
                         .iter()
-                        .filter(|f| f.mode == crate::walk::Mode::Geometry)
+                        .filter(|f| f.mode == lemi_walk::Mode::Geometry)
                         .cloned()
                         .collect();
                 }
                 row.frames = frames
                     .into_iter()
-                    .filter(|f| f.mode == crate::walk::Mode::Impostor)
+                    .filter(|f| f.mode == lemi_walk::Mode::Impostor)
                     .collect();
                 row.walk = Some(v);
             }
@@ -356,7 +356,10 @@ pub fn run(args: Args) -> Result<()> {
     lemi_core::container::write_atomic(&md_path, markdown.as_bytes())
         .with_context(|| format!("writing {}", md_path.display()))?;
     let svg_path = args.out.join("frame_times.svg");
-    if let Err(e) = write_svg(&svg_path, &rows, &geometry_frames) {
+    let walks: Vec<(&str, &[FrameRecord])> = (rows.iter())
+        .map(|r| (r.name.as_str(), r.frames.as_slice()))
+        .collect();
+    if let Err(e) = lemi_walk::write_frame_times_svg(&svg_path, &walks, &geometry_frames) {
         eprintln!("warning: no plot ({e:#})");
     }
     let all = json!({
@@ -408,47 +411,6 @@ fn strip_eval(v: &Value) -> Value {
         o.remove("histogram");
     }
     v
-}
-
-/// The records of a walk's `frames.csv`.
-fn read_frames(path: &Path) -> Result<Vec<FrameRecord>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    let mut out = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        if f.len() != crate::walk::CSV_COLUMNS.len() {
-            bail!("{}: line {} has {} fields", path.display(), i + 1, f.len());
-        }
-        let num = |k: usize| -> Result<f64> {
-            f[k].parse::<f64>()
-                .with_context(|| format!("{}: line {}: `{}`", path.display(), i + 1, f[k]))
-        };
-        let int = |k: usize| -> Result<u64> {
-            f[k].parse::<u64>()
-                .with_context(|| format!("{}: line {}: `{}`", path.display(), i + 1, f[k]))
-        };
-        out.push(FrameRecord {
-            frame: int(0)?,
-            t: num(1)?,
-            mode: if f[2] == "geometry" {
-                crate::walk::Mode::Geometry
-            } else {
-                crate::walk::Mode::Impostor
-            },
-            cpu_ms: num(3)?,
-            gpu_ms: f[4].parse().ok(),
-            near_triangles: int(5)?,
-            impostor_quads: int(6)?,
-            total_triangles: int(7)?,
-            cell: (!f[8].is_empty()).then(|| f[8].to_string()),
-            cell_switch: f[9] == "1",
-            stalled: f[10] == "1",
-            cache_bytes: int(11)?,
-            fallback: f[12] == "1",
-        });
-    }
-    Ok(out)
 }
 
 fn num(v: &Value, key: &str) -> Option<f64> {
@@ -621,121 +583,4 @@ fn render_markdown(rows: &[Row], geometry: Option<&Value>, command: &str) -> Str
     }
     let _ = writeln!(m, "\n![frame time per frame](frame_times.svg)");
     m
-}
-
-/// Frame time and far-field primitives per frame of every strategy (SVG).
-fn write_svg(path: &Path, rows: &[Row], geometry: &[FrameRecord]) -> Result<()> {
-    use plotters::prelude::*;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (1200, 800)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-        let (top, bottom) = root.split_vertically(450);
-        let mut series: Vec<(String, Vec<(f64, f64)>)> = rows
-            .iter()
-            .filter(|r| !r.frames.is_empty())
-            .map(|r| {
-                (
-                    r.name.clone(),
-                    r.frames
-                        .iter()
-                        .map(|f| (f.frame as f64, f.cpu_ms))
-                        .collect(),
-                )
-            })
-            .collect();
-        if !geometry.is_empty() {
-            series.push((
-                "all geometry".into(),
-                geometry
-                    .iter()
-                    .map(|f| (f.frame as f64, f.cpu_ms))
-                    .collect(),
-            ));
-        }
-        let prims: Vec<(String, Vec<(f64, f64)>)> = rows
-            .iter()
-            .filter(|r| !r.frames.is_empty())
-            .map(|r| {
-                (
-                    r.name.clone(),
-                    r.frames
-                        .iter()
-                        .map(|f| (f.frame as f64, (f.near_triangles + f.impostor_quads) as f64))
-                        .collect(),
-                )
-            })
-            .collect();
-        panel(&top, "frame time per frame", "ms", &series)?;
-        panel(
-            &bottom,
-            "primitives per frame (near triangles + far-field primitives)",
-            "primitives",
-            &prims,
-        )?;
-        root.present().map_err(|e| anyhow!("{e}"))?;
-    }
-    lemi_core::container::write_atomic(path, svg.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))
-}
-
-fn panel<DB: plotters::prelude::DrawingBackend>(
-    area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
-    title: &str,
-    ylabel: &str,
-    series: &[(String, Vec<(f64, f64)>)],
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    use plotters::prelude::*;
-    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow!("{e:?}");
-    let x1 = series
-        .iter()
-        .flat_map(|s| s.1.iter().map(|p| p.0))
-        .fold(1.0f64, f64::max);
-    let y1 = series
-        .iter()
-        .flat_map(|s| s.1.iter().map(|p| p.1))
-        .filter(|y| y.is_finite())
-        .fold(1.0f64, f64::max);
-    let mut chart = ChartBuilder::on(area)
-        .caption(title, ("sans-serif", 20))
-        .margin(10)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(0.0..x1, 0.0..y1 * 1.05)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("frame")
-        .y_desc(ylabel)
-        .draw()
-        .map_err(err)?;
-    let colors = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(214, 39, 40),
-    ];
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let c = colors[i % colors.len()];
-        chart
-            .draw_series(LineSeries::new(
-                pts.iter().copied().filter(|p| p.1.is_finite()),
-                c.stroke_width(2),
-            ))
-            .map_err(err)?
-            .label(name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(err)?;
-    Ok(())
 }

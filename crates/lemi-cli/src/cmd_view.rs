@@ -32,7 +32,7 @@ use lemi_gpu::{
     BackendChoice, Frame, GpuMaterials, GpuScene, ImpostorRenderer, Presented, RenderOptions,
     Renderer, UploadOptions, WindowSurface,
 };
-use lemi_runtime::{StallPolicy, Streamer, StreamerOptions};
+use lemi_runtime::Streamer;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -386,16 +386,9 @@ impl App {
             GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
                 .context("uploading the scene's materials")?,
         );
-        let options = StreamerOptions {
-            cache_budget_bytes: self.args.cache_mb.saturating_mul(1 << 20),
-            upload_budget_bytes_per_frame: self.args.upload_kb.saturating_mul(1 << 10),
-            max_speed: self.args.max_speed,
-            stall_policy: match self.args.stall {
-                crate::cmd_walk::StallArg::Block => StallPolicy::Block,
-                crate::cmd_walk::StallArg::Fallback => StallPolicy::Fallback,
-            },
-            ..Default::default()
-        };
+        let a = &self.args;
+        let options =
+            crate::cmd_walk::streamer_options(a.cache_mb, a.upload_kb, a.max_speed, a.stall);
         let mut streamer = Streamer::new(
             gpu.clone(),
             self.manifest.clone(),
@@ -493,7 +486,7 @@ impl App {
                 self.paths_written.push(self.record_path.clone());
             }
             Err(e) => {
-                let e = e.context("writing the recorded path");
+                let e = anyhow::Error::new(e).context("writing the recorded path");
                 eprintln!("error: {}", crate::error_chain(&e));
                 if self.error.is_none() {
                     self.error = Some(e);

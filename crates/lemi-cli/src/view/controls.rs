@@ -1,14 +1,13 @@
 //! The viewer's camera: fly/walk movement from held keys, looking by mouse drag or arrow keys, and
 //! path recording in the `lemi-path` format that `lemi walk --path` replays
-//! ([`crate::walk::path`]; yaw 0 looks along −Z, 90 along +X, pitch up positive).
+//! ([`lemi_walk::path`]; yaw 0 looks along −Z, 90 along +X, pitch up positive).
 //!
 //! Pure state, no window: the event loop in `cmd_view.rs` feeds it keys, mouse motion and frame
 //! times, so the movement rules and the recording are unit-tested here.
 
 use glam::DVec3;
 
-use crate::walk::path::{CameraPath, Key};
-use crate::walk::Pose;
+use lemi_walk::{CameraPath, Key, Pose};
 
 /// The highest pitch the viewer turns to (degrees); the path format allows ±90, but at ±90 the
 /// heading is ambiguous to a person steering.
