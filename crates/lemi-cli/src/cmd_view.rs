@@ -13,8 +13,6 @@
 //! down/up (flying), F fly/walk (walking keeps the eye height), G impostors/all geometry, L layer
 //! colouring, R start/stop recording, Esc quit. Every change of state is printed to stdout.
 
-#[path = "view/controls.rs"]
-mod controls;
 #[path = "view/hud.rs"]
 mod hud;
 #[path = "view/layers.rs"]
@@ -40,9 +38,9 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use controls::{FlyCamera, Held, MoveMode, Recording};
 use hud::{Hud, Line};
 use layers::CellLayers;
+use lemi_walk::controls::{FlyCamera, Held, MoveMode, Recording};
 
 /// Open an interactive window on a bundle: fly/walk through it, HUD, toggles, path recording.
 #[derive(clap::Args)]
