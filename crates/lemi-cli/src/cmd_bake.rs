@@ -176,7 +176,7 @@ fn strategy_name(layering: &Layering) -> (&'static str, String) {
     }
 }
 
-fn parse_region(s: &str) -> Result<Aabb, String> {
+pub(crate) fn parse_region(s: &str) -> Result<Aabb, String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|p| p.trim().parse::<f64>())
@@ -241,27 +241,18 @@ impl CellSummary {
     }
 }
 
-pub fn run(args: Args) -> Result<()> {
-    if let Some(bundle) = &args.merge {
-        let m = lemi_bake::merge(bundle)?;
-        if args.json {
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&json!({
-                    "merged": bundle,
-                    "cells": m.cells.len(),
-                    "bytes": m.cells.iter().map(|c| c.bytes).sum::<u64>(),
-                }))?
-            );
-        } else {
-            println!(
-                "merged     {} cells into {}",
-                m.cells.len(),
-                lemi_core::bundle::manifest_path(bundle).display()
-            );
-        }
-        return Ok(());
-    }
+/// A bake job built from the flags (`lemi bake`, and `lemi compare` for each layered strategy):
+/// the job, the scene it bakes, the GPU backend and what the flags warn of.
+pub(crate) struct Prepared {
+    pub job: BakeJob,
+    pub scene: lemi_core::Scene,
+    pub backend: BackendChoice,
+    pub warnings: Vec<String>,
+    pub load_seconds: f64,
+}
+
+/// Checks the flags, loads the scene and builds the job (`-o` is required).
+pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
     let Some(out) = args.out.clone() else {
         bail!("-o BUNDLE is required");
     };
@@ -343,7 +334,7 @@ pub fn run(args: Args) -> Result<()> {
         scenes: sources.clone(),
         up: args.up,
     };
-    let (scene, load_s) = load_scene(&scene_args, args.json)?;
+    let (scene, load_seconds) = load_scene(&scene_args, args.json)?;
     let fingerprint =
         lemi_scene::fingerprint(&sources, args.up.into()).context("fingerprinting the scene")?;
     let region = match args.region {
@@ -395,11 +386,50 @@ pub fn run(args: Args) -> Result<()> {
             fingerprint,
             triangles: scene.triangle_count(),
         },
-        params: params.clone(),
+        params,
         grid,
         cells,
         shard: args.shard,
     };
+    Ok(Prepared {
+        job,
+        scene,
+        backend,
+        warnings,
+        load_seconds,
+    })
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if let Some(bundle) = &args.merge {
+        let m = lemi_bake::merge(bundle)?;
+        if args.json {
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&json!({
+                    "merged": bundle,
+                    "cells": m.cells.len(),
+                    "bytes": m.cells.iter().map(|c| c.bytes).sum::<u64>(),
+                }))?
+            );
+        } else {
+            println!(
+                "merged     {} cells into {}",
+                m.cells.len(),
+                lemi_core::bundle::manifest_path(bundle).display()
+            );
+        }
+        return Ok(());
+    }
+    let Prepared {
+        job,
+        scene,
+        backend,
+        warnings,
+        load_seconds: load_s,
+    } = prepare(&args)?;
+    let out = job.bundle.clone();
+    let params = job.params.clone();
     for w in &warnings {
         eprintln!("warning: {w}");
     }

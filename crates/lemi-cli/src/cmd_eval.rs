@@ -11,9 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use lemi_eval::{EvalOptions, ViewpointSet};
 use std::sync::Arc;
 
-use lemi_eval::StrategyCells;
-use lemi_gpu::{BackendChoice, Gpu, GpuMaterials, RenderOptions};
-use lemi_strategy::StrategyContext;
+use lemi_gpu::{BackendChoice, Gpu};
 
 /// Measure how far the impostor images of a bundle are from the real geometry.
 #[derive(clap::Args)]
@@ -130,30 +128,7 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_message(what.to_string());
     };
     let t = std::time::Instant::now();
-    let run = if kind.is_layered() {
-        lemi_eval::evaluate_bundle(&gpu, &bundle, &scene, &options, progress)?
-    } else {
-        let scene = Arc::new(scene);
-        let materials = Arc::new(
-            GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
-                .context("uploading the scene's materials")?,
-        );
-        let ctx = StrategyContext {
-            gpu: gpu.clone(),
-            bundle: bundle.clone(),
-            scene: scene.clone(),
-            materials,
-        };
-        let mut strategy = crate::strategy::open(&ctx, kind, Default::default())?;
-        let mut cells = StrategyCells::new(
-            strategy.as_mut(),
-            RenderOptions {
-                clear: options.clear,
-                ..Default::default()
-            },
-        );
-        lemi_eval::evaluate_with(&gpu, &bundle, &scene, &options, &mut cells, progress)?
-    };
+    let run = crate::strategy::evaluate(&gpu, &bundle, Arc::new(scene), kind, &options, progress)?;
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();
     let dir = args

@@ -71,8 +71,8 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// With a BUNDLE: write reference | impostor | difference side by side (difference: black where
-    /// equal, the amplified colour difference elsewhere, red where the reference shows geometry
-    /// and the impostor shows background).
+    /// equal, the amplified colour difference elsewhere, red at crack pixels as `lemi eval` counts
+    /// them).
     #[arg(long)]
     pub compare: bool,
     /// With a BUNDLE: the scene to use instead of the manifest's sources (must be the same scene:
@@ -311,7 +311,9 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         let reference = Renderer::new(&gpu)?
             .render(&gpu_scene, &view, &options)
             .context("rendering the reference view")?;
-        let c = compare(&reference, &frame);
+        let tolerance = lemi_eval::layered_crack_tolerance(&reference, &file, &cell);
+        let c = lemi_eval::side_by_side(&reference, &frame, &tolerance)
+            .context("comparing the impostor view with the reference")?;
         save_image(&c.image, &args.output)?;
         comparison = Some(c);
     } else {
@@ -341,9 +343,9 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         if let Some(c) = &comparison {
             out["compare"] = json!({
                 "differing_pixels": c.differing,
-                "crack_pixels": c.cracks,
-                "reference_covered": c.reference_covered,
-                "impostor_covered": c.impostor_covered,
+                "crack_pixels": c.cracks.count,
+                "reference_covered": c.coverage.reference_covered,
+                "impostor_covered": c.coverage.test_covered,
                 "psnr_db": c.psnr,
             });
         }
@@ -409,79 +411,6 @@ fn render_timed(
     let frame = frame.context("no frame rendered")?;
     times.sort_by(f64::total_cmp);
     Ok((frame, times[times.len() / 2]))
-}
-
-/// A reference/impostor comparison: the side-by-side image and its numbers.
-pub struct Comparison {
-    pub image: image::RgbaImage,
-    /// Pixels whose colour differs at all.
-    pub differing: u64,
-    /// Pixels where the reference shows geometry and the impostor background.
-    pub cracks: u64,
-    pub reference_covered: u64,
-    pub impostor_covered: u64,
-    /// PSNR over RGB in dB (infinite when identical).
-    pub psnr: f64,
-}
-
-impl Comparison {
-    pub fn summary(&self) -> String {
-        let n = (self.image.width() / 3) as u64 * self.image.height() as u64;
-        format!(
-            "{} of {n} pixels differ ({:.2} %), {} crack pixels (geometry in the reference, \
-             background in the impostor view), PSNR {:.1} dB",
-            self.differing,
-            100.0 * self.differing as f64 / n.max(1) as f64,
-            self.cracks,
-            self.psnr
-        )
-    }
-}
-
-/// Compares a reference and an impostor frame of the same size.
-pub fn compare(reference: &Frame, impostor: &Frame) -> Comparison {
-    let (w, h) = (reference.width, reference.height);
-    let mut img = image::RgbaImage::new(3 * w, h);
-    let (mut differing, mut cracks, mut rc, mut ic) = (0u64, 0u64, 0u64, 0u64);
-    let mut se = 0.0f64;
-    for y in 0..h {
-        for x in 0..w {
-            let i = (y * w + x) as usize;
-            let r = reference.rgba.get(4 * i..4 * i + 4).unwrap_or(&[0; 4]);
-            let m = impostor.rgba.get(4 * i..4 * i + 4).unwrap_or(&[0; 4]);
-            let rd = reference.depth.get(i).is_some_and(|d| d.is_finite());
-            let md = impostor.depth.get(i).is_some_and(|d| d.is_finite());
-            rc += rd as u64;
-            ic += md as u64;
-            img.put_pixel(x, y, image::Rgba([r[0], r[1], r[2], 255]));
-            img.put_pixel(w + x, y, image::Rgba([m[0], m[1], m[2], 255]));
-            let d: [u8; 3] = std::array::from_fn(|k| r[k].abs_diff(m[k]));
-            se += d.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
-            let diff = if rd && !md {
-                cracks += 1;
-                [255, 0, 0]
-            } else {
-                d.map(|v| v.saturating_mul(4))
-            };
-            if d != [0; 3] || rd != md {
-                differing += 1;
-            }
-            img.put_pixel(2 * w + x, y, image::Rgba([diff[0], diff[1], diff[2], 255]));
-        }
-    }
-    let mse = se / (3.0 * w as f64 * h as f64).max(1.0);
-    Comparison {
-        image: img,
-        differing,
-        cracks,
-        reference_covered: rc,
-        impostor_covered: ic,
-        psnr: if mse == 0.0 {
-            f64::INFINITY
-        } else {
-            10.0 * (255.0f64 * 255.0 / mse).log10()
-        },
-    }
 }
 
 fn save_image(img: &image::RgbaImage, path: &Path) -> anyhow::Result<()> {

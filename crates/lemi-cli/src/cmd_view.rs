@@ -13,8 +13,6 @@
 //! down/up (flying), F fly/walk (walking keeps the eye height), G impostors/all geometry, L layer
 //! colouring, R start/stop recording, Esc quit. Every change of state is printed to stdout.
 
-#[path = "view/controls.rs"]
-mod controls;
 #[path = "view/hud.rs"]
 mod hud;
 #[path = "view/layers.rs"]
@@ -32,7 +30,7 @@ use lemi_gpu::{
     BackendChoice, Frame, GpuMaterials, GpuScene, ImpostorRenderer, Presented, RenderOptions,
     Renderer, UploadOptions, WindowSurface,
 };
-use lemi_runtime::{StallPolicy, Streamer, StreamerOptions};
+use lemi_runtime::Streamer;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -40,9 +38,9 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use controls::{FlyCamera, Held, MoveMode, Recording};
 use hud::{Hud, Line};
 use layers::CellLayers;
+use lemi_walk::controls::{FlyCamera, Held, MoveMode, Recording};
 
 /// Open an interactive window on a bundle: fly/walk through it, HUD, toggles, path recording.
 #[derive(clap::Args)]
@@ -386,16 +384,9 @@ impl App {
             GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
                 .context("uploading the scene's materials")?,
         );
-        let options = StreamerOptions {
-            cache_budget_bytes: self.args.cache_mb.saturating_mul(1 << 20),
-            upload_budget_bytes_per_frame: self.args.upload_kb.saturating_mul(1 << 10),
-            max_speed: self.args.max_speed,
-            stall_policy: match self.args.stall {
-                crate::cmd_walk::StallArg::Block => StallPolicy::Block,
-                crate::cmd_walk::StallArg::Fallback => StallPolicy::Fallback,
-            },
-            ..Default::default()
-        };
+        let a = &self.args;
+        let options =
+            crate::cmd_walk::streamer_options(a.cache_mb, a.upload_kb, a.max_speed, a.stall);
         let mut streamer = Streamer::new(
             gpu.clone(),
             self.manifest.clone(),
@@ -493,7 +484,7 @@ impl App {
                 self.paths_written.push(self.record_path.clone());
             }
             Err(e) => {
-                let e = e.context("writing the recorded path");
+                let e = anyhow::Error::new(e).context("writing the recorded path");
                 eprintln!("error: {}", crate::error_chain(&e));
                 if self.error.is_none() {
                     self.error = Some(e);

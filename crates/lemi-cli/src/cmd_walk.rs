@@ -1,29 +1,17 @@
 //! `lemi walk BUNDLE (--auto | --path P)`: headless replay of a camera path through a baked region
-//! (GI 2002 sec. 3 and 6, Figs. 8-9). The runtime streams cells ahead of the viewer
-//! (`lemi-runtime`: prediction, background loading, LRU cache, uploads under a per-frame budget)
-//! and draws the current cell's near geometry plus its impostors; the same path is then replayed
-//! drawing all geometry. Writes `frames.csv`, `summary.json` and `plot.png` (frame rate and
-//! primitives per frame, cell changes and stalls marked).
-//!
-//! The replay is paced in real time: a frame that finishes before its time on the path waits, so
-//! the background loader gets exactly the time a real walk would give it. When frames take longer
-//! than the path's frame interval (software rendering at high resolution), the loader gets more
-//! time than in real time; the summary says so (`slower_than_real_time_frames`).
+//! (GI 2002 sec. 3 and 6, Figs. 8-9), with streaming impostors through a far-field strategy and
+//! then with all geometry ([`lemi_walk::walk`] does both, paced in real time). Writes
+//! `frames.csv`, `summary.json`, `plot.png` and `path.json`.
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use lemi_core::camera::View;
-use lemi_gpu::{
-    BackendChoice, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions,
-};
+use lemi_gpu::{BackendChoice, Gpu, GpuMaterials};
 use lemi_runtime::{StallPolicy, StreamerOptions};
-use lemi_strategy::{FrameRequest, StrategyContext};
-
-use crate::walk::{auto_path, write_csv, write_plot, CameraPath, FrameRecord, Mode, Summary};
+use lemi_strategy::StrategyContext;
+use lemi_walk::{auto_path, CameraPath, WalkEvent, WalkOptions};
 
 /// Replay a camera path with streaming impostors and with all geometry; frame times, plots.
 #[derive(clap::Args)]
@@ -117,21 +105,21 @@ pub fn run(args: Args) -> Result<()> {
     }
     let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
     let manifest = bundle.manifest().clone();
-    let baked: Vec<_> = manifest
-        .cells
-        .iter()
-        .filter_map(|c| manifest.grid.cell_of(c.id).ok())
-        .collect();
     let path = match &args.path {
         Some(p) => CameraPath::read(p)?,
-        None => auto_path(
-            &manifest.grid,
-            &baked,
-            args.walk_speed,
-            args.fly_speed,
-            args.fps,
-        )
-        .context("--auto")?,
+        None => {
+            let baked: Vec<_> = (manifest.cells.iter())
+                .filter_map(|c| manifest.grid.cell_of(c.id).ok())
+                .collect();
+            auto_path(
+                &manifest.grid,
+                &baked,
+                args.walk_speed,
+                args.fly_speed,
+                args.fps,
+            )
+            .context("--auto")?
+        }
     };
     let out = args.out.clone().unwrap_or_else(|| args.bundle.join("walk"));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
@@ -141,47 +129,26 @@ pub fn run(args: Args) -> Result<()> {
     }
     path.write(&out.join("path.json"))?;
 
-    let (w, h) = args.size;
-    let fov_x = args.fov.or(manifest.params.output_fov_deg).unwrap_or(60.0);
-    let fov_y = 2.0
-        * ((0.5 * fov_x.to_radians()).tan() * h as f64 / w as f64)
-            .atan()
-            .to_degrees();
     let gpu = Arc::new(Gpu::new(backend)?);
     let scene = Arc::new(scene);
     let materials = Arc::new(
         GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
             .context("uploading the scene's materials")?,
     );
-    let options = StreamerOptions {
-        cache_budget_bytes: args.cache_mb.saturating_mul(1 << 20),
-        upload_budget_bytes_per_frame: args.upload_kb.saturating_mul(1 << 10),
-        max_speed: args.max_speed,
-        stall_policy: match args.stall {
-            StallArg::Block => StallPolicy::Block,
-            StallArg::Fallback => StallPolicy::Fallback,
-        },
-        ..Default::default()
-    };
     let ctx = StrategyContext {
         gpu: gpu.clone(),
         bundle: bundle.clone(),
         scene: scene.clone(),
-        materials: materials.clone(),
+        materials,
     };
     let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
-    let mut strategy = crate::strategy::open(&ctx, kind, options)?;
-    let renderer = Renderer::new(&gpu)?;
-    let render_options = RenderOptions {
-        clear: [150, 190, 235, 255],
-        ..Default::default()
-    };
-    // All geometry: for the comparison replay.
-    let full = GpuScene::upload(&gpu, &scene, &UploadOptions::default())
-        .context("uploading the scene for the geometry replay")?;
-    let total_triangles = scene.triangle_count();
-    let frames: Vec<_> = path.frames().collect();
-    let n = frames.len() as u64;
+    let mut strategy = crate::strategy::open(
+        &ctx,
+        kind,
+        streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),
+    )?;
+
+    let n = path.frame_count();
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
@@ -192,187 +159,99 @@ pub fn run(args: Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    if let Some((_, _, first)) = frames.first() {
-        bar.set_message("preloading the first cells");
-        strategy
-            .preload(first.eye, first.velocity, Duration::from_secs(60))
-            .context("preloading the first cells")?;
-    }
-    let dt = 1.0 / path.fps;
-    let mut impostor = Vec::with_capacity(frames.len());
-    let mut warnings = Vec::new();
-    let mut slow_frames = 0u64;
-    let mut last_cell: Option<String> = None;
-    let mut regenerations = 0u64;
-    let start = Instant::now();
-    let t0 = frames.first().map(|f| f.1).unwrap_or(0.0);
-    for (index, t, pose) in &frames {
-        // real-time pacing: this frame starts at its time on the path
-        let due = Duration::from_secs_f64((t - t0).max(0.0));
-        match due.checked_sub(start.elapsed()) {
-            Some(wait) => std::thread::sleep(wait),
-            None if *index > 0 => slow_frames += 1,
-            None => {}
-        }
-        let view = camera_view(pose, fov_y, w, h)?;
-        let t_frame = Instant::now();
-        let f = strategy
-            .frame(&FrameRequest {
-                eye: pose.eye,
-                velocity: pose.velocity,
-                dt,
-                view: &view,
-                options: &render_options,
-                measure_error: false,
-            })
-            .with_context(|| format!("rendering frame {index} ({kind})"))?;
-        let cpu_ms = 1e3 * t_frame.elapsed().as_secs_f64();
-        warnings.extend(f.warnings.iter().cloned());
-        let switch = *index > 0 && f.cell != last_cell;
-        last_cell = f.cell.clone();
-        regenerations += f.regenerations;
-        let frame = f.frame;
-        let record = FrameRecord {
-            frame: *index,
-            t: *t,
-            mode: Mode::Impostor,
-            cpu_ms,
-            gpu_ms: f.gpu_ms,
-            near_triangles: f.near_triangles,
-            impostor_quads: f.far_primitives,
-            total_triangles: if f.fallback {
-                total_triangles
-            } else {
-                f.near_triangles
-            },
-            cell: f.cell,
-            cell_switch: switch,
-            stalled: f.stalled,
-            cache_bytes: f.cache_bytes,
-            fallback: f.fallback,
-        };
-        if let Some(d) = &args.frames_dir {
-            if index % args.every == 0 {
-                let p = d.join(format!("frame-{index:06}.png"));
-                image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba)
-                    .context("frame has the wrong size")?
-                    .save(&p)
-                    .with_context(|| format!("writing {}", p.display()))?;
+    let mut observe = |event: WalkEvent<'_>| -> Result<(), String> {
+        match event {
+            WalkEvent::Preloading => bar.set_message("preloading the first cells"),
+            WalkEvent::Impostor { record, frame } => {
+                if let Some(d) = &args.frames_dir {
+                    if record.frame % args.every == 0 {
+                        let p = d.join(format!("frame-{:06}.png", record.frame));
+                        image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba.clone())
+                            .ok_or("frame has the wrong size")?
+                            .save(&p)
+                            .map_err(|e| format!("writing {}: {e}", p.display()))?;
+                    }
+                }
+                bar.inc(1);
+                let cell = record.cell.as_deref().unwrap_or("-");
+                bar.set_message(format!("impostors, cell {cell}"));
+            }
+            WalkEvent::Geometry { .. } => {
+                bar.inc(1);
+                bar.set_message("all geometry");
             }
         }
-        impostor.push(record);
-        bar.inc(1);
-        bar.set_message(format!(
-            "impostors, cell {}",
-            last_cell.as_deref().unwrap_or("-")
-        ));
-    }
-    let report = strategy.report();
+        Ok(())
+    };
+    let (w, h) = args.size;
+    let fov_x = args.fov.or(manifest.params.output_fov_deg).unwrap_or(60.0);
+    let mut run = lemi_walk::walk(
+        strategy.as_mut(),
+        &path,
+        WalkOptions {
+            size: args.size,
+            fov_x_deg: fov_x,
+            geometry: !args.no_geometry,
+            observer: Some(&mut observe),
+            ..WalkOptions::new(&gpu, &scene, &manifest.grid)
+        },
+    )?;
     drop(strategy);
-    let mut geometry = Vec::new();
-    if !args.no_geometry {
-        for (index, t, pose) in &frames {
-            let view = camera_view(pose, fov_y, w, h)?;
-            let t_frame = Instant::now();
-            renderer
-                .render(&full, &view, &render_options)
-                .context("rendering a geometry frame")?;
-            geometry.push(FrameRecord {
-                frame: *index,
-                t: *t,
-                mode: Mode::Geometry,
-                cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
-                gpu_ms: renderer.last_gpu_ms(),
-                near_triangles: 0,
-                impostor_quads: 0,
-                total_triangles,
-                cell: manifest.grid.locate(pose.eye).map(|c| c.id().to_string()),
-                cell_switch: false,
-                stalled: false,
-                cache_bytes: 0,
-                fallback: false,
-            });
-            bar.inc(1);
-            bar.set_message("all geometry");
-        }
-    }
     bar.finish_and_clear();
-    let mut all = impostor.clone();
-    all.extend(geometry.iter().cloned());
-    write_csv(&out.join("frames.csv"), &all)?;
-    let summary = Summary::of(&impostor, &geometry);
-    summary.write_json(&out.join("summary.json"))?;
-    write_plot(&out.join("plot.png"), &impostor, &geometry)?;
-    let mut v = serde_json::to_value(&summary)?;
-    v["slower_than_real_time_frames"] = serde_json::json!(slow_frames);
-    v["size"] = serde_json::json!([w, h]);
-    v["fov_x_deg"] = serde_json::json!(fov_x);
-    v["adapter"] = serde_json::json!(gpu.describe());
-    v["strategy"] = serde_json::json!(kind.name());
-    v["loads"] = serde_json::json!(report.loads);
-    v["evictions"] = serde_json::json!(report.evictions);
-    v["peak_cache_bytes"] = serde_json::json!(report.peak_bytes);
-    v["regenerations"] = serde_json::json!(regenerations);
-    v["prepare_seconds"] = serde_json::json!(report.prepare_seconds);
-    v["prepared_cells"] = serde_json::json!(report.prepared_cells);
-    v["texture_bytes_per_cell"] = serde_json::json!(report.texture_bytes_per_cell);
-    v["warnings"] = serde_json::json!(warnings);
-    v["out"] = serde_json::json!(out);
-    let summary_path = out.join("summary.json");
-    lemi_core::container::write_atomic(&summary_path, &serde_json::to_vec_pretty(&v)?)
-        .with_context(|| format!("writing {}", summary_path.display()))?;
+    run.summary.out = Some(out.clone());
+    run.write_files(&out)?;
+    let s = &run.summary;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        println!("{}", serde_json::to_string_pretty(s)?);
         return Ok(());
     }
-    for w in &warnings {
+    for w in &s.warnings {
         eprintln!("warning: {w}");
     }
     let ms = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1} ms"));
+    let times = |x: Option<f64>| x.map_or("-".to_string(), |s| format!("{s:.1}x"));
+    let st = &s.stats;
     println!("lemi walk");
-    println!("adapter    {}", gpu.describe());
+    println!("adapter    {}", s.adapter);
     println!(
         "path       {} frames at {} fps ({:.1} s), {w}x{h}, {fov_x}° horizontal",
-        summary.frames,
+        st.frames,
         path.fps,
         path.duration()
     );
     println!(
         "{:<10} median {}, p99 {}; {} cell switches, {} stalls, {} loads, {} evictions, {} regenerations, peak cache {:.1} MB",
         kind.name(),
-        ms(summary.impostor_median_ms),
-        ms(summary.impostor_p99_ms),
-        summary.cell_switches,
-        summary.stalls,
-        report.loads,
-        report.evictions,
-        regenerations,
-        report.peak_bytes as f64 / 1e6
+        ms(st.impostor_median_ms),
+        ms(st.impostor_p99_ms),
+        st.cell_switches,
+        st.stalls,
+        s.loads,
+        s.evictions,
+        s.regenerations,
+        s.peak_cache_bytes as f64 / 1e6
     );
     if !args.no_geometry {
         println!(
             "geometry   median {}, p99 {}; speed-up of the median {}",
-            ms(summary.geometry_median_ms),
-            ms(summary.geometry_p99_ms),
-            summary
-                .speedup_median
-                .map_or("-".to_string(), |s| format!("{s:.1}x"))
+            ms(st.geometry_median_ms),
+            ms(st.geometry_p99_ms),
+            times(st.speedup_median)
         );
     }
-    if summary.impostor_gpu_median_ms.is_some() || summary.geometry_gpu_median_ms.is_some() {
+    if st.impostor_gpu_median_ms.is_some() || st.geometry_gpu_median_ms.is_some() {
         println!(
             "gpu time   median {} ({}), {} (all geometry); speed-up {}",
-            ms(summary.impostor_gpu_median_ms),
+            ms(st.impostor_gpu_median_ms),
             kind.name(),
-            ms(summary.geometry_gpu_median_ms),
-            summary
-                .speedup_gpu_median
-                .map_or("-".to_string(), |s| format!("{s:.1}x"))
+            ms(st.geometry_gpu_median_ms),
+            times(st.speedup_gpu_median)
         );
     }
-    if slow_frames > 0 {
+    if s.slower_than_real_time_frames > 0 {
         println!(
-            "note       {slow_frames} frames took longer than the path's frame interval: the loader had more time than in real time"
+            "note       {} frames took longer than the path's frame interval: the loader had more time than in real time",
+            s.slower_than_real_time_frames
         );
     }
     println!(
@@ -382,9 +261,22 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-fn camera_view(pose: &crate::walk::Pose, fov_y: f64, w: u32, h: u32) -> Result<View> {
-    Ok(pose
-        .camera(fov_y, w, h)
-        .context("a camera of the path")?
-        .view())
+/// The streaming runtime's options from the flags of `walk` and `view`: cache budget (MiB),
+/// upload budget per frame (KiB), the highest speed prefetching plans for, the stall policy.
+pub fn streamer_options(
+    cache_mb: u64,
+    upload_kb: u64,
+    max_speed: f64,
+    stall: StallArg,
+) -> StreamerOptions {
+    StreamerOptions {
+        cache_budget_bytes: cache_mb.saturating_mul(1 << 20),
+        upload_budget_bytes_per_frame: upload_kb.saturating_mul(1 << 10),
+        max_speed,
+        stall_policy: match stall {
+            StallArg::Block => StallPolicy::Block,
+            StallArg::Fallback => StallPolicy::Fallback,
+        },
+        ..Default::default()
+    }
 }

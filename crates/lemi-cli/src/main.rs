@@ -13,7 +13,6 @@ mod cmd_view;
 mod cmd_walk;
 mod load;
 mod strategy;
-mod walk;
 
 use clap::{Parser, Subcommand};
 

@@ -1,7 +1,12 @@
 //! `--strategy NAME` for `walk`, `eval` and `compare`: which far-field strategy draws a bundle.
 
-use anyhow::{bail, Result};
-use lemi_core::bundle::Manifest;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use lemi_core::bundle::{Bundle, Manifest};
+use lemi_core::Scene;
+use lemi_eval::{EvalOptions, EvalRun, StrategyCells};
+use lemi_gpu::{Gpu, GpuMaterials, RenderOptions};
 use lemi_runtime::StreamerOptions;
 use lemi_strategy::dynamic::{DynamicOptions, DynamicStrategy};
 use lemi_strategy::layered::{bundle_strategy, LayeredStrategy};
@@ -42,4 +47,40 @@ pub fn open(
         StrategyKind::Warp => Box::new(WarpStrategy::new(ctx, WarpOptions::default())?),
         StrategyKind::Dynamic => Box::new(DynamicStrategy::new(ctx, DynamicOptions::default())?),
     })
+}
+
+/// The certificate of strategy `kind` on `bundle`: layered bundles through
+/// [`lemi_eval::evaluate_bundle`] (their own texels' depths), the others through the strategy
+/// ([`StrategyCells`]). `progress(done, total, what)` as there.
+pub fn evaluate(
+    gpu: &Arc<Gpu>,
+    bundle: &Bundle,
+    scene: Arc<Scene>,
+    kind: StrategyKind,
+    options: &EvalOptions,
+    progress: impl FnMut(usize, usize, &str),
+) -> Result<EvalRun> {
+    if kind.is_layered() {
+        return Ok(lemi_eval::evaluate_bundle(
+            gpu, bundle, &scene, options, progress,
+        )?);
+    }
+    let ctx = StrategyContext {
+        gpu: gpu.clone(),
+        bundle: bundle.clone(),
+        scene: scene.clone(),
+        materials: Arc::new(
+            GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
+                .context("uploading the scene's materials")?,
+        ),
+    };
+    let mut strategy = open(&ctx, kind, Default::default())?;
+    let render = RenderOptions {
+        clear: options.clear,
+        ..Default::default()
+    };
+    let mut cells = StrategyCells::new(strategy.as_mut(), render);
+    Ok(lemi_eval::evaluate_with(
+        gpu, bundle, &scene, options, &mut cells, progress,
+    )?)
 }

@@ -14,6 +14,7 @@
 //!
 //! No function here panics on bad input: mismatched sizes and malformed frames are [`EvalError`]s.
 
+pub mod compare;
 pub mod evaluate;
 pub mod image_metrics;
 pub mod report;
@@ -21,6 +22,7 @@ pub mod run;
 pub mod stats;
 pub mod strategy_cells;
 
+pub use compare::{layered_crack_tolerance, side_by_side, SideBySide};
 pub use evaluate::{evaluate_view, ViewEval};
 pub use image_metrics::{
     coverage, crack_pixels, flip, mse_from_psnr, mse_rgb, ppd_default, ppd_for_monitor,

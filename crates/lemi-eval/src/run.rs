@@ -126,30 +126,6 @@ fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Camera, 
     Camera::new(eye, dir, up, fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
 }
 
-/// The depth range a crack test allows at reference view depth `r`: one layer's slab (the slab
-/// containing `r`, infinite for the farthest) plus the cell's diagonal (the view depth from a
-/// viewpoint off the centre differs from the distance to the centre by at most that).
-fn slab_tolerance(file: &CellFile, cell: &ViewCell, r: f32) -> f32 {
-    let diag = 2.0 * cell.half.length();
-    let Some(layers) = file.header.layers.first() else {
-        return f32::INFINITY;
-    };
-    let r = r as f64;
-    if r < file.header.near_field {
-        return diag as f32;
-    }
-    for l in layers {
-        if r >= l.near_border {
-            return if l.far_border >= f64::MAX {
-                f32::INFINITY
-            } else {
-                (l.far_border - l.near_border + diag) as f32
-            };
-        }
-    }
-    diag as f32
-}
-
 /// What the evaluation asks of the images it judges: one view of one cell at a time.
 pub trait CellRenderer {
     /// Gets ready to render views of `cell` (called once per cell, before its views).
@@ -229,7 +205,7 @@ impl CellRenderer for LayeredCells<'_> {
 
     fn crack_tolerance(&self, far: f32) -> f32 {
         match &self.current {
-            Some((cell, file, _, _)) => slab_tolerance(file, cell, far),
+            Some((cell, file, _, _)) => crate::compare::layer_slab_tolerance(file, cell, far),
             None => f32::INFINITY,
         }
     }
@@ -362,20 +338,10 @@ pub fn evaluate_with(
                     }
                 }
                 let impostor = rendered.frame;
-                // A surface may legitimately move by its sub-pixel error, so at a depth edge the
-                // impostor may show the farther neighbour: allow the farthest reference depth of
-                // the 3×3 neighbourhood plus the renderer's tolerance there.
-                let wi = w as usize;
-                let hi = h as usize;
                 let tol = |i: usize, r: f32| {
-                    let (x, y) = (i % wi, i / wi);
-                    let mut far = r;
-                    for yy in y.saturating_sub(1)..(y + 2).min(hi) {
-                        for xx in x.saturating_sub(1)..(x + 2).min(wi) {
-                            far = far.max(reference.depth[yy * wi + xx]);
-                        }
-                    }
-                    (far - r) + renderer.crack_tolerance(far)
+                    crate::compare::neighbourhood_tolerance(&reference, i, r, |far| {
+                        renderer.crack_tolerance(far)
+                    })
                 };
                 let e = evaluate_view(&reference, &impostor, &rendered.error_px, &tol, ppd)?;
                 stats.merge(&e.error);

@@ -1,13 +1,15 @@
 //! The viewer's on-screen text: lines drawn into the frame's RGBA before it is presented, over a
 //! translucent box in the top-left corner, plus a row of colour swatches (the layer legend).
-//! Glyphs are rasterized with `ab_glyph` from a system TrueType font (DejaVu Sans Mono and other
-//! common ones; `LEMI_HUD_FONT` names another) and cached per character. Without a font the HUD
+//! Glyphs are rasterized with `ab_glyph` from the font [`lemi_walk::font::find_font`] finds for
+//! the HUD (DejaVu Sans Mono and other common ones; `LEMI_HUD_FONT` names another file) and cached
+//! per character. Without a font the HUD
 //! has no text and the window title carries the numbers.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use ab_glyph::{Font, FontVec, PxScale, ScaleFont};
+use ab_glyph::{Font, PxScale, ScaleFont};
+use lemi_walk::font::{find_font, FontUse, LoadedFont};
 
 /// One rasterized glyph: coverage `w × h` at offset `(dx, dy)` from the pen position on the
 /// baseline, and the advance.
@@ -45,7 +47,7 @@ impl Line {
 
 /// The HUD renderer: a font (if one was found) and its glyph cache at one pixel size.
 pub struct Hud {
-    font: Option<(PathBuf, FontVec)>,
+    font: Option<LoadedFont>,
     px: f32,
     glyphs: HashMap<char, Glyph>,
 }
@@ -54,7 +56,7 @@ impl Hud {
     /// Finds a font: `LEMI_HUD_FONT`, then common monospaced and sans fonts.
     pub fn new() -> Hud {
         Hud {
-            font: find_font(),
+            font: find_font(FontUse::Hud),
             px: 0.0,
             glyphs: HashMap::new(),
         }
@@ -62,11 +64,11 @@ impl Hud {
 
     /// The font file used, if any.
     pub fn font_path(&self) -> Option<&Path> {
-        self.font.as_ref().map(|(p, _)| p.as_path())
+        self.font.as_ref().map(|f| f.path.as_path())
     }
 
     fn glyph(&mut self, c: char) -> Option<&Glyph> {
-        let (_, font) = self.font.as_ref()?;
+        let font = &self.font.as_ref()?.font;
         let px = self.px;
         Some(self.glyphs.entry(c).or_insert_with(|| {
             let sf = font.as_scaled(PxScale::from(px));
@@ -150,7 +152,7 @@ impl Hud {
         let ascent = self
             .font
             .as_ref()
-            .map_or(px * 0.8, |(_, f)| f.as_scaled(PxScale::from(px)).ascent());
+            .map_or(px * 0.8, |f| f.font.as_scaled(PxScale::from(px)).ascent());
         for (row, l) in lines.iter().enumerate() {
             let baseline = (pad + row * line_h) as f32 + ascent;
             let mut pen = pad as f32;
@@ -191,39 +193,6 @@ impl Hud {
             }
         }
     }
-}
-
-/// The HUD font: `LEMI_HUD_FONT`, then common system fonts (monospaced first).
-fn find_font() -> Option<(PathBuf, FontVec)> {
-    let load = |p: &Path| -> Option<(PathBuf, FontVec)> {
-        let bytes = std::fs::read(p).ok()?;
-        FontVec::try_from_vec(bytes)
-            .ok()
-            .map(|f| (p.to_path_buf(), f))
-    };
-    if let Some(p) = std::env::var_os("LEMI_HUD_FONT") {
-        if let Some(f) = load(Path::new(&p)) {
-            return Some(f);
-        }
-    }
-    [
-        "/usr/share/fonts/truetype/dejavu/DejaVuSansMono.ttf",
-        "/usr/share/fonts/TTF/DejaVuSansMono.ttf",
-        "/usr/share/fonts/dejavu/DejaVuSansMono.ttf",
-        "/usr/share/fonts/truetype/liberation/LiberationMono-Regular.ttf",
-        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-        "/usr/share/fonts/TTF/DejaVuSans.ttf",
-        "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-        "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-        "/usr/share/fonts/truetype/freefont/FreeSans.ttf",
-        "/usr/share/fonts/truetype/noto/NotoSans-Regular.ttf",
-        "/System/Library/Fonts/Menlo.ttc",
-        "/Library/Fonts/Arial.ttf",
-        "C:\\Windows\\Fonts\\consola.ttf",
-        "C:\\Windows\\Fonts\\arial.ttf",
-    ]
-    .iter()
-    .find_map(|p| load(Path::new(p)))
 }
 
 #[cfg(test)]

@@ -1,14 +1,13 @@
-//! The viewer's camera: fly/walk movement from held keys, looking by mouse drag or arrow keys, and
-//! path recording in the `lemi-path` format that `lemi walk --path` replays
-//! ([`crate::walk::path`]; yaw 0 looks along −Z, 90 along +X, pitch up positive).
+//! An interactive walk's camera: fly/walk movement from held keys, looking by mouse drag or arrow
+//! keys, and path recording in the `lemi-path` format that [`crate::walk`] replays
+//! ([`crate::path`]; yaw 0 looks along −Z, 90 along +X, pitch up positive).
 //!
-//! Pure state, no window: the event loop in `cmd_view.rs` feeds it keys, mouse motion and frame
-//! times, so the movement rules and the recording are unit-tested here.
+//! Pure state, no window: the viewer's event loop (`lemi view`) feeds it keys, mouse motion and
+//! frame times, so the movement rules and the recording are unit-tested here.
 
 use glam::DVec3;
 
-use crate::walk::path::{CameraPath, Key};
-use crate::walk::Pose;
+use crate::{CameraPath, Key, Pose};
 
 /// The highest pitch the viewer turns to (degrees); the path format allows ±90, but at ±90 the
 /// heading is ambiguous to a person steering.
@@ -208,6 +207,11 @@ impl Recording {
     /// Poses the path will have.
     pub fn len(&self) -> usize {
         self.keys.len() + usize::from(self.pending.is_some())
+    }
+
+    /// No pose recorded yet.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     /// The path, or `None` with fewer than 2 poses (nothing to replay).

@@ -1,4 +1,4 @@
-//! Camera paths for `lemi walk`: the JSON file that `lemi walk --path` replays and the interactive
+//! Camera paths of a walk: the JSON file that `lemi walk --path` replays and the interactive
 //! viewer records, its validation, sampling at the path's frame rate, and the automatic
 //! walkthrough + flyover of `lemi walk --auto` that stays inside the baked view cells (GI 2002
 //! sec. 3: the impostors of a cell are valid only while the viewer is inside it; the paper's
@@ -35,11 +35,12 @@
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use glam::DVec3;
 use lemi_core::camera::{Camera, CameraError};
 use lemi_core::cell::{CellGrid, ViewCell};
 use serde::{Deserialize, Serialize};
+
+use crate::WalkError;
 
 /// The `format` string of a camera path file.
 pub const FORMAT: &str = "lemi-path";
@@ -219,9 +220,18 @@ impl CameraPath {
     }
 
     /// Reads and validates a path file; errors name the file and the field.
-    pub fn read(path: &Path) -> Result<CameraPath> {
-        let what = || format!("camera path {}", path.display());
-        let text = std::fs::read_to_string(path).with_context(what)?;
+    pub fn read(path: &Path) -> Result<CameraPath, WalkError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| WalkError::io("camera path", path, e))?;
+        let json = |source| WalkError::Json {
+            what: "camera path",
+            path: path.to_path_buf(),
+            source,
+        };
+        let bad = |source| WalkError::Path {
+            path: path.to_path_buf(),
+            source,
+        };
         // The header first, so that another format or version gets its own message rather than
         // an error about a field that version may not have.
         #[derive(Deserialize)]
@@ -229,30 +239,38 @@ impl CameraPath {
             format: Option<String>,
             version: Option<u32>,
         }
-        let header: Header = serde_json::from_str(&text).with_context(what)?;
+        let header: Header = serde_json::from_str(&text).map_err(json)?;
         match header.format.as_deref() {
             Some(FORMAT) => {}
-            Some(other) => return Err(PathError::Format(other.to_string())).with_context(what),
-            None => anyhow::bail!(
-                "{}: not a camera path (no `format`: \"{FORMAT}\" field)",
-                what()
-            ),
+            Some(other) => return Err(bad(PathError::Format(other.to_string()))),
+            None => {
+                return Err(WalkError::NotAPath {
+                    path: path.to_path_buf(),
+                })
+            }
         }
         if let Some(v) = header.version.filter(|&v| v != VERSION) {
-            return Err(PathError::Version(v)).with_context(what);
+            return Err(bad(PathError::Version(v)));
         }
-        let p: CameraPath = serde_json::from_str(&text).with_context(what)?;
-        p.validate().with_context(what)?;
+        let p: CameraPath = serde_json::from_str(&text).map_err(json)?;
+        p.validate().map_err(bad)?;
         Ok(p)
     }
 
     /// Validates and writes the path as pretty JSON, atomically (temporary file + rename).
-    pub fn write(&self, path: &Path) -> Result<()> {
-        let what = || format!("camera path {}", path.display());
-        self.validate().with_context(what)?;
-        let mut text = serde_json::to_string_pretty(self).with_context(what)?;
+    pub fn write(&self, path: &Path) -> Result<(), WalkError> {
+        self.validate().map_err(|source| WalkError::Path {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut text = serde_json::to_string_pretty(self).map_err(|source| WalkError::Json {
+            what: "camera path",
+            path: path.to_path_buf(),
+            source,
+        })?;
         text.push('\n');
-        lemi_core::container::write_atomic(path, text.as_bytes()).with_context(what)
+        lemi_core::container::write_atomic(path, text.as_bytes())
+            .map_err(|e| WalkError::io("camera path", path, e))
     }
 
     /// Seconds from the first key to the last (0 for fewer than 2 keys).

@@ -1,4 +1,4 @@
-//! The PNG plot of a `lemi walk` replay, after Jeschke & Wimmer, GI 2002, Figs. 8 and 9: the top
+//! The PNG plot of a walk, after Jeschke & Wimmer, GI 2002, Figs. 8 and 9: the top
 //! panel shows the frame rate of every frame (`1000 / cpu_ms`) of the impostor replay and of the
 //! all-geometry replay of the same path, with a vertical line at every cell switch and a red dot
 //! on every stalled frame (orange ticks under the frames that fell back to all geometry); the
@@ -9,19 +9,23 @@
 //! PNG with `image` and written atomically. `plotters` can only draw text into a bitmap with a
 //! font library (`ttf`: font-kit and the system's fontconfig; `ab_glyph`: a font registered for
 //! every backend, which would make the crate's SVG plots depend on one too), so the text is
-//! rasterized here with `ab_glyph` from a TrueType font found on the system (DejaVu Sans and
-//! other common ones; `LEMI_PLOT_FONT` names another). Without a font the plot is drawn without
-//! text, and [`PlotInfo::font`] says so.
+//! rasterized here with `ab_glyph` from the system font [`crate::font::find_font`] finds
+//! (DejaVu Sans and other common ones; `LEMI_PLOT_FONT` names another). Without a font the plot
+//! is drawn without text, and [`PlotInfo::font`] says so.
+//!
+//! [`write_frame_times_svg`] draws several walks (one per far-field strategy) into one SVG: frame
+//! time and primitives per frame.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use ab_glyph::{Font, FontVec, PxScale, ScaleFont};
-use anyhow::{bail, Context, Result};
 use image::RgbImage;
 use plotters::prelude::*;
 
-use super::record::{nearest_rank, FrameRecord, Summary};
+use crate::font::{find_font, FontUse, LoadedFont};
+use crate::record::{nearest_rank, FrameRecord, FrameStats};
+use crate::WalkError;
 
 /// Size and title of a plot.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,7 +53,11 @@ pub struct PlotInfo {
 }
 
 /// The plot at the default size (1200 × 800) to `path`.
-pub fn write_plot(path: &Path, impostor: &[FrameRecord], geometry: &[FrameRecord]) -> Result<()> {
+pub fn write_plot(
+    path: &Path,
+    impostor: &[FrameRecord],
+    geometry: &[FrameRecord],
+) -> Result<(), WalkError> {
     write_plot_with(path, impostor, geometry, &PlotOptions::default()).map(|_| ())
 }
 
@@ -59,13 +67,17 @@ pub fn write_plot_with(
     impostor: &[FrameRecord],
     geometry: &[FrameRecord],
     opts: &PlotOptions,
-) -> Result<PlotInfo> {
-    let what = || format!("walk plot {}", path.display());
-    let (img, info) = render_plot(impostor, geometry, opts).with_context(what)?;
+) -> Result<PlotInfo, WalkError> {
+    let plot_err = |message: String| WalkError::Plot {
+        path: path.to_path_buf(),
+        message,
+    };
+    let (img, info) = render_plot(impostor, geometry, opts).map_err(plot_err)?;
     let mut png = Vec::new();
     img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .with_context(what)?;
-    lemi_core::container::write_atomic(path, &png).with_context(what)?;
+        .map_err(|e| plot_err(format!("encoding the PNG: {e}")))?;
+    lemi_core::container::write_atomic(path, &png)
+        .map_err(|e| WalkError::io("walk plot", path, e))?;
     Ok(info)
 }
 
@@ -135,18 +147,21 @@ fn fps_of(r: &FrameRecord) -> Option<f64> {
     (r.cpu_ms.is_finite() && r.cpu_ms > 0.0).then(|| 1000.0 / r.cpu_ms)
 }
 
-/// Renders the plot into an RGB image (see the module doc).
+/// Renders the plot into an RGB image (see the module doc); the error says what could not be
+/// drawn.
 pub fn render_plot(
     impostor: &[FrameRecord],
     geometry: &[FrameRecord],
     opts: &PlotOptions,
-) -> Result<(RgbImage, PlotInfo)> {
+) -> Result<(RgbImage, PlotInfo), String> {
     let (w, h) = (opts.width, opts.height);
     if !(320..=16384).contains(&w) || !(240..=16384).contains(&h) {
-        bail!("plot size must be within 320x240 and 16384x16384, got {w}x{h}");
+        return Err(format!(
+            "plot size must be within 320x240 and 16384x16384, got {w}x{h}"
+        ));
     }
     if impostor.is_empty() && geometry.is_empty() {
-        bail!("no frames to plot");
+        return Err("no frames to plot".into());
     }
     let font = font();
     let fpx = (h as f32 / 48.0).clamp(11.0, 22.0);
@@ -187,11 +202,11 @@ pub fn render_plot(
 
     let n = impostor.len().max(geometry.len());
     let stroke = if n <= 1500 { 2 } else { 1 };
-    let summary = Summary::of(impostor, geometry);
+    let summary = FrameStats::of(impostor, geometry);
 
     let mut buf = vec![255u8; w as usize * h as usize * 3];
     {
-        let err = |e: DrawingAreaErrorKind<_>| anyhow::anyhow!("drawing the plot: {e:?}");
+        let err = |e: DrawingAreaErrorKind<_>| format!("drawing the plot: {e:?}");
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
 
@@ -437,16 +452,16 @@ pub fn render_plot(
         root.present().map_err(err)?;
     }
 
-    let mut img = RgbImage::from_raw(w, h, buf).context("plot buffer has the wrong size")?;
-    if let Some((_, f)) = font {
+    let mut img = RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
+    if let Some(f) = font {
         for l in &labels {
-            draw_text(&mut img, f, l);
+            draw_text(&mut img, &f.font, l);
         }
     }
     Ok((
         img,
         PlotInfo {
-            font: font.map(|(p, _)| p.clone()),
+            font: font.map(|f| f.path.clone()),
         },
     ))
 }
@@ -503,60 +518,10 @@ fn legend<DB: DrawingBackend>(
     Ok(())
 }
 
-/// The font for labels, found once: `LEMI_PLOT_FONT`, then common system fonts, then any
-/// TrueType file under the usual font folders.
-fn font() -> Option<&'static (PathBuf, FontVec)> {
-    static FONT: OnceLock<Option<(PathBuf, FontVec)>> = OnceLock::new();
-    FONT.get_or_init(|| {
-        let load = |p: &Path| -> Option<(PathBuf, FontVec)> {
-            let bytes = std::fs::read(p).ok()?;
-            FontVec::try_from_vec(bytes)
-                .ok()
-                .map(|f| (p.to_path_buf(), f))
-        };
-        let mut candidates: Vec<PathBuf> = Vec::new();
-        if let Some(p) = std::env::var_os("LEMI_PLOT_FONT") {
-            candidates.push(PathBuf::from(p));
-        }
-        for p in [
-            "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-            "/usr/share/fonts/TTF/DejaVuSans.ttf",
-            "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-            "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
-            "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-            "/usr/share/fonts/liberation-sans/LiberationSans-Regular.ttf",
-            "/usr/share/fonts/truetype/freefont/FreeSans.ttf",
-            "/usr/share/fonts/truetype/noto/NotoSans-Regular.ttf",
-            "/Library/Fonts/Arial.ttf",
-            "/System/Library/Fonts/Supplemental/Arial.ttf",
-            "C:\\Windows\\Fonts\\arial.ttf",
-        ] {
-            candidates.push(PathBuf::from(p));
-        }
-        if let Some(f) = candidates.iter().find_map(|p| load(p)) {
-            return Some(f);
-        }
-        // Any .ttf a few folders deep.
-        let mut dirs = vec![(PathBuf::from("/usr/share/fonts"), 0)];
-        while let Some((d, depth)) = dirs.pop() {
-            let Ok(entries) = std::fs::read_dir(&d) else {
-                continue;
-            };
-            let mut entries: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
-            entries.sort();
-            for p in entries {
-                if p.is_dir() && depth < 4 {
-                    dirs.push((p, depth + 1));
-                } else if p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ttf")) {
-                    if let Some(f) = load(&p) {
-                        return Some(f);
-                    }
-                }
-            }
-        }
-        None
-    })
-    .as_ref()
+/// The font for labels, found once ([`find_font`]).
+fn font() -> Option<&'static LoadedFont> {
+    static FONT: OnceLock<Option<LoadedFont>> = OnceLock::new();
+    FONT.get_or_init(|| find_font(FontUse::Plot)).as_ref()
 }
 
 /// Blends `l` into `img` (black text, anti-aliased).
@@ -606,11 +571,118 @@ fn draw_text(img: &mut RgbImage, font: &FontVec, l: &Label) {
     }
 }
 
+/// Frame time and primitives per frame (near triangles + far-field primitives) of several walks
+/// along the same path, one line each (`walks`: a name and its impostor records), plus the
+/// all-geometry replay's frame times; an SVG of 1200 × 800 written atomically to `path`.
+pub fn write_frame_times_svg(
+    path: &Path,
+    walks: &[(&str, &[FrameRecord])],
+    geometry: &[FrameRecord],
+) -> Result<(), WalkError> {
+    let plot_err = |message: String| WalkError::Plot {
+        path: path.to_path_buf(),
+        message,
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1200, 800)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_err(e.to_string()))?;
+        let (top, bottom) = root.split_vertically(450);
+        let walks: Vec<_> = walks.iter().filter(|(_, f)| !f.is_empty()).collect();
+        let line = |frames: &[FrameRecord], y: &dyn Fn(&FrameRecord) -> f64| -> Vec<(f64, f64)> {
+            frames.iter().map(|f| (f.frame as f64, y(f))).collect()
+        };
+        let mut times: Vec<(String, Vec<(f64, f64)>)> = walks
+            .iter()
+            .map(|(name, f)| (name.to_string(), line(f, &|r| r.cpu_ms)))
+            .collect();
+        if !geometry.is_empty() {
+            times.push(("all geometry".into(), line(geometry, &|r| r.cpu_ms)));
+        }
+        let prims: Vec<(String, Vec<(f64, f64)>)> = walks
+            .iter()
+            .map(|(name, f)| {
+                let p = |r: &FrameRecord| (r.near_triangles + r.impostor_quads) as f64;
+                (name.to_string(), line(f, &p))
+            })
+            .collect();
+        svg_panel(&top, "frame time per frame", "ms", &times).map_err(plot_err)?;
+        svg_panel(
+            &bottom,
+            "primitives per frame (near triangles + far-field primitives)",
+            "primitives",
+            &prims,
+        )
+        .map_err(plot_err)?;
+        root.present().map_err(|e| plot_err(e.to_string()))?;
+    }
+    lemi_core::container::write_atomic(path, svg.as_bytes())
+        .map_err(|e| WalkError::io("frame-time plot", path, e))
+}
+
+/// One panel of [`write_frame_times_svg`]: a line per series, a legend.
+fn svg_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    ylabel: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), String> {
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| format!("{e:?}");
+    let x1 = series
+        .iter()
+        .flat_map(|s| s.1.iter().map(|p| p.0))
+        .fold(1.0f64, f64::max);
+    let y1 = series
+        .iter()
+        .flat_map(|s| s.1.iter().map(|p| p.1))
+        .filter(|y| y.is_finite())
+        .fold(1.0f64, f64::max);
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..x1, 0.0..y1 * 1.05)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("frame")
+        .y_desc(ylabel)
+        .draw()
+        .map_err(err)?;
+    let colors = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(214, 39, 40),
+    ];
+    for (i, (name, pts)) in series.iter().enumerate() {
+        let c = colors[i % colors.len()];
+        chart
+            .draw_series(LineSeries::new(
+                pts.iter().copied().filter(|p| p.1.is_finite()),
+                c.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
-    use super::super::record::tests::rec;
-    use super::super::record::Mode;
     use super::*;
+    use crate::record::tests::rec;
+    use crate::record::Mode;
 
     fn records() -> (Vec<FrameRecord>, Vec<FrameRecord>) {
         let imp: Vec<FrameRecord> = (0..300)
@@ -675,7 +747,7 @@ mod tests {
         assert_eq!((img.width(), img.height()), (1200, 800));
         write_plot(&f, &[], &geo).unwrap();
         // Errors name the file.
-        let e = format!("{:#}", write_plot(&f, &[], &[]).unwrap_err());
+        let e = write_plot(&f, &[], &[]).unwrap_err().to_string();
         assert!(e.contains("walk.png") && e.contains("no frames"), "{e}");
         let tiny = PlotOptions {
             width: 10,
@@ -683,6 +755,24 @@ mod tests {
         };
         assert!(write_plot_with(&f, &imp, &geo, &tiny).is_err());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn frame_times_svg_has_every_walk() {
+        let (imp, geo) = records();
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("frame_times.svg");
+        write_frame_times_svg(
+            &f,
+            &[("lemi", &imp), ("warp", &imp[..10]), ("none", &[])],
+            &geo,
+        )
+        .unwrap();
+        let svg = std::fs::read_to_string(&f).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("frame time"));
+        assert!(svg.contains("lemi") && svg.contains("warp") && svg.contains("all geometry"));
+        let e = write_frame_times_svg(&dir.path().join("no/dir/x.svg"), &[], &[]).unwrap_err();
+        assert!(e.to_string().contains("x.svg"), "{e}");
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Per-frame records of a `lemi walk` replay, their CSV file, and the summary statistics (the
+//! Per-frame records of a walk, their CSV file (`frames.csv`), and the frame-time statistics (the
 //! numbers behind GI 2002 Figs. 8–9: frame times of the impostor and the all-geometry replay of
 //! the same path, primitives per frame, cell switches and stalls).
 //!
@@ -13,11 +13,11 @@
 //! (the first value for `p = 0`). The median is the 50th percentile, so of an even number of
 //! values it is the lower of the two middle ones. Non-finite times are left out of the statistics.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
+
+use crate::WalkError;
 
 /// Which renderer drew a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -98,47 +98,161 @@ pub const CSV_COLUMNS: [&str; 13] = [
     "fallback",
 ];
 
-/// A CSV field, quoted when it needs to be.
-fn field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
+/// One row of `frames.csv`: the fields of [`FrameRecord`] in [`CSV_COLUMNS`] order, numbers in
+/// Rust's shortest round-trip form (`40`, not `40.0`), booleans as `0`/`1`.
+#[derive(Serialize, Deserialize)]
+struct CsvRow {
+    frame: u64,
+    #[serde(with = "shortest")]
+    t: f64,
+    mode: Mode,
+    #[serde(with = "shortest")]
+    cpu_ms: f64,
+    #[serde(with = "shortest_opt")]
+    gpu_ms: Option<f64>,
+    near_triangles: u64,
+    impostor_quads: u64,
+    total_triangles: u64,
+    cell: Option<String>,
+    #[serde(with = "bit")]
+    cell_switch: bool,
+    #[serde(with = "bit")]
+    stalled: bool,
+    cache_bytes: u64,
+    #[serde(with = "bit")]
+    fallback: bool,
+}
+
+impl From<&FrameRecord> for CsvRow {
+    fn from(r: &FrameRecord) -> Self {
+        CsvRow {
+            frame: r.frame,
+            t: r.t,
+            mode: r.mode,
+            cpu_ms: r.cpu_ms,
+            gpu_ms: r.gpu_ms,
+            near_triangles: r.near_triangles,
+            impostor_quads: r.impostor_quads,
+            total_triangles: r.total_triangles,
+            cell: r.cell.clone(),
+            cell_switch: r.cell_switch,
+            stalled: r.stalled,
+            cache_bytes: r.cache_bytes,
+            fallback: r.fallback,
+        }
     }
 }
 
-/// The records as CSV: a header row of [`CSV_COLUMNS`], then one row per record; numbers in
-/// Rust's shortest round-trip form, `None` as an empty field, booleans as `0`/`1`.
-pub fn to_csv(records: &[FrameRecord]) -> String {
-    let mut out = CSV_COLUMNS.join(",");
-    out.push('\n');
-    let b = |v: bool| if v { "1" } else { "0" };
-    for r in records {
-        let _ = writeln!(
-            out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
-            r.frame,
-            r.t,
-            r.mode.as_str(),
-            r.cpu_ms,
-            r.gpu_ms.map(|g| g.to_string()).unwrap_or_default(),
-            r.near_triangles,
-            r.impostor_quads,
-            r.total_triangles,
-            field(r.cell.as_deref().unwrap_or("")),
-            b(r.cell_switch),
-            b(r.stalled),
-            r.cache_bytes,
-            b(r.fallback),
-        );
+impl From<CsvRow> for FrameRecord {
+    fn from(r: CsvRow) -> Self {
+        FrameRecord {
+            frame: r.frame,
+            t: r.t,
+            mode: r.mode,
+            cpu_ms: r.cpu_ms,
+            gpu_ms: r.gpu_ms,
+            near_triangles: r.near_triangles,
+            impostor_quads: r.impostor_quads,
+            total_triangles: r.total_triangles,
+            cell: r.cell.filter(|c| !c.is_empty()),
+            cell_switch: r.cell_switch,
+            stalled: r.stalled,
+            cache_bytes: r.cache_bytes,
+            fallback: r.fallback,
+        }
     }
-    out
+}
+
+/// `f64` as its shortest round-trip text (`Display`).
+mod shortest {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&v.to_string())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        let text = String::deserialize(d)?;
+        text.trim().parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// `Option<f64>`: the shortest round-trip text, or an empty field.
+mod shortest_opt {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&v.map(|v| v.to_string()).unwrap_or_default())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+        let text = String::deserialize(d)?;
+        let text = text.trim();
+        if text.is_empty() {
+            return Ok(None);
+        }
+        text.parse().map(Some).map_err(serde::de::Error::custom)
+    }
+}
+
+/// `bool` as `0`/`1` (reading also accepts `true`/`false`).
+mod bit {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &bool, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(if *v { "1" } else { "0" })
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<bool, D::Error> {
+        match String::deserialize(d)?.trim() {
+            "1" | "true" => Ok(true),
+            "0" | "false" => Ok(false),
+            other => Err(serde::de::Error::custom(format!(
+                "expected 0 or 1, got `{other}`"
+            ))),
+        }
+    }
+}
+
+/// The records as CSV: a header row of [`CSV_COLUMNS`], then one row per record (see
+/// [`CsvRow`]); `None` is an empty field; fields with commas, quotes or line breaks are quoted.
+pub fn to_csv(records: &[FrameRecord]) -> Result<String, csv::Error> {
+    let mut w = csv::WriterBuilder::new()
+        .terminator(csv::Terminator::Any(b'\n'))
+        .from_writer(Vec::new());
+    if records.is_empty() {
+        w.write_record(CSV_COLUMNS)?;
+    }
+    for r in records {
+        w.serialize(CsvRow::from(r))?;
+    }
+    let bytes = w
+        .into_inner()
+        .map_err(|e| csv::Error::from(e.into_error()))?;
+    Ok(String::from_utf8_lossy(&bytes).into_owned())
 }
 
 /// Writes [`to_csv`] to `path` atomically.
-pub fn write_csv(path: &Path, records: &[FrameRecord]) -> Result<()> {
-    lemi_core::container::write_atomic(path, to_csv(records).as_bytes())
-        .with_context(|| format!("frame CSV {}", path.display()))
+pub fn write_csv(path: &Path, records: &[FrameRecord]) -> Result<(), WalkError> {
+    let text = to_csv(records).map_err(|source| WalkError::Csv {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    lemi_core::container::write_atomic(path, text.as_bytes())
+        .map_err(|e| WalkError::io("frame CSV", path, e))
+}
+
+/// Reads a `frames.csv` (columns by name, so extra columns are ignored); errors name the file and
+/// the line.
+pub fn read_csv(path: &Path) -> Result<Vec<FrameRecord>, WalkError> {
+    let csv_err = |source| WalkError::Csv {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut r = csv::Reader::from_path(path).map_err(csv_err)?;
+    r.deserialize::<CsvRow>()
+        .map(|row| row.map(FrameRecord::from).map_err(csv_err))
+        .collect()
 }
 
 /// The nearest-rank `p`-th percentile (`0 ≤ p ≤ 100`) of sorted values (see the module doc);
@@ -194,10 +308,11 @@ impl TimeStats {
     }
 }
 
-/// The summary JSON of a replay. Counts are of the impostor replay; a statistic with no frames
-/// behind it (e.g. no geometry replay) is `null`.
+/// The statistics of a replay, the first keys of `summary.json` ([`crate::WalkSummary`] adds
+/// what the run knows besides the frames). Counts are of the impostor replay; a statistic with no
+/// frames behind it (e.g. no geometry replay) is `null`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Summary {
+pub struct FrameStats {
     /// Frames of the impostor replay.
     pub frames: usize,
     /// Frames of the geometry replay.
@@ -231,15 +346,15 @@ pub struct Summary {
     pub geometry: TimeStats,
 }
 
-impl Summary {
-    pub fn of(impostor: &[FrameRecord], geometry: &[FrameRecord]) -> Summary {
+impl FrameStats {
+    pub fn of(impostor: &[FrameRecord], geometry: &[FrameRecord]) -> FrameStats {
         let i = TimeStats::of(impostor);
         let g = TimeStats::of(geometry);
         let speedup = match (g.median_ms, i.median_ms) {
             (Some(gm), Some(im)) if im > 0.0 => Some(gm / im),
             _ => None,
         };
-        Summary {
+        FrameStats {
             frames: impostor.len(),
             geometry_frames: geometry.len(),
             stalls: impostor.iter().filter(|r| r.stalled).count(),
@@ -262,14 +377,6 @@ impl Summary {
             impostor: i,
             geometry: g,
         }
-    }
-
-    /// Writes the summary as pretty JSON, atomically.
-    pub fn write_json(&self, path: &Path) -> Result<()> {
-        let what = || format!("walk summary {}", path.display());
-        let mut text = serde_json::to_string_pretty(self).with_context(what)?;
-        text.push('\n');
-        lemi_core::container::write_atomic(path, text.as_bytes()).with_context(what)
     }
 }
 
@@ -332,7 +439,7 @@ pub(crate) mod tests {
         let geo: Vec<FrameRecord> = (0..100)
             .map(|i| rec(i, Mode::Geometry, 3.0 * (i + 1) as f64))
             .collect();
-        let s = Summary::of(&imp, &geo);
+        let s = FrameStats::of(&imp, &geo);
         assert_eq!(s.frames, 100);
         assert_eq!(s.geometry_frames, 100);
         assert_eq!(s.stalls, 2);
@@ -371,12 +478,12 @@ pub(crate) mod tests {
             assert!(v.get(k).is_some_and(|x| !x.is_null()), "{k}");
         }
         // No geometry replay: its numbers are null.
-        let s = Summary::of(&imp, &[]);
+        let s = FrameStats::of(&imp, &[]);
         assert_eq!(s.geometry_median_ms, None);
         assert_eq!(s.speedup_median, None);
         let v: serde_json::Value = serde_json::to_value(&s).unwrap();
         assert!(v["speedup_median"].is_null());
-        let empty = Summary::of(&[], &[]);
+        let empty = FrameStats::of(&[], &[]);
         assert_eq!(empty.frames, 0);
         assert_eq!(empty.impostor_median_ms, None);
     }
@@ -390,7 +497,7 @@ pub(crate) mod tests {
         b.cell = None;
         b.stalled = true;
         b.cell = Some("a,\"b".into());
-        let text = to_csv(&[a, b]);
+        let text = to_csv(&[a.clone(), b.clone()]).unwrap();
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[0],
@@ -411,13 +518,20 @@ pub(crate) mod tests {
         let f = dir.join("frames.csv");
         write_csv(&f, &[rec(0, Mode::Impostor, 1.0)]).unwrap();
         assert!(std::fs::read_to_string(&f).unwrap().starts_with("frame,t,"));
-        let s = Summary::of(&[rec(0, Mode::Impostor, 1.0)], &[]);
-        let j = dir.join("summary.json");
-        s.write_json(&j).unwrap();
-        let back: Summary = serde_json::from_str(&std::fs::read_to_string(&j).unwrap()).unwrap();
+        // The file reads back as the records it was written from.
+        write_csv(&f, &[a.clone(), b.clone()]).unwrap();
+        assert_eq!(read_csv(&f).unwrap(), vec![a, b]);
+        write_csv(&f, &[]).unwrap();
+        assert!(std::fs::read_to_string(&f).unwrap().starts_with("frame,t,"));
+        assert_eq!(read_csv(&f).unwrap(), vec![]);
+        std::fs::write(&f, "frame,t,mode\n0,x,impostor\n").unwrap();
+        let e = read_csv(&f).unwrap_err().to_string();
+        assert!(e.contains("frames.csv"), "{e}");
+        let s = FrameStats::of(&[rec(0, Mode::Impostor, 1.0)], &[]);
+        let back: FrameStats = serde_json::from_str(&serde_json::to_string(&s).unwrap()).unwrap();
         assert_eq!(back, s);
         let e = format!(
-            "{:#}",
+            "{}",
             write_csv(&dir.join("no/such/dir/x.csv"), &[]).unwrap_err()
         );
         assert!(e.contains("x.csv"), "{e}");
