@@ -32,17 +32,8 @@ use lemi_testkit::{add_closed_box as add_box, gpu};
 /// 56 m, the near field ends at about 49 m.
 fn params() -> BakeParams {
     BakeParams {
-        cell_size: 10.0,
-        cell_height: None,
-        resolution: 64,
-        target: LayerTarget::Layers(4),
-        faces: Face::HORIZONTAL.to_vec(),
         alpha: 0.02,
-        output_fov_deg: None,
-        output_width: None,
-        micro_grid: 8,
-        micro_threshold: 0.6,
-        layering: Default::default(),
+        ..lemi_testkit::small_params(64, LayerTarget::Layers(4))
     }
 }
 

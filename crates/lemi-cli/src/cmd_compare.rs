@@ -23,8 +23,8 @@ use lemi_bake::{Baker, CellOutcome};
 use lemi_core::cell::CellId;
 use lemi_core::{Aabb, Scene};
 use lemi_eval::{EvalOptions, EvalRun, ViewpointSet};
-use lemi_gpu::{BackendChoice, Gpu, GpuMaterials};
-use lemi_strategy::{StrategyContext, StrategyKind};
+use lemi_gpu::{BackendChoice, Gpu};
+use lemi_strategy::StrategyKind;
 use lemi_walk::{auto_path, CameraPath, FrameRecord, WalkOptions, WalkRun, WalkSummary};
 use serde::Serialize;
 
@@ -455,15 +455,7 @@ fn walk(
     let dir = args.out.join(format!("walk-{}", k.name()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     path.write(&dir.join("path.json"))?;
-    let ctx = StrategyContext {
-        gpu: gpu.clone(),
-        bundle: bundle.clone(),
-        scene: scene.clone(),
-        materials: Arc::new(
-            GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
-                .context("uploading the scene's materials")?,
-        ),
-    };
+    let ctx = crate::strategy::context(gpu, bundle, scene.clone())?;
     let streamer = streamer_options(512, 8192, 12.0, StallArg::Block);
     let mut strategy = crate::strategy::open(&ctx, kind, streamer)?;
     let mut run = lemi_walk::walk(

@@ -34,6 +34,19 @@ pub fn kind_for(manifest: &Manifest, name: Option<&str>) -> Result<StrategyKind>
     Ok(kind)
 }
 
+/// What the strategies of `bundle` are built from: the GPU, the bundle and its scene with the
+/// scene's materials uploaded.
+pub fn context(gpu: &Arc<Gpu>, bundle: &Bundle, scene: Arc<Scene>) -> Result<StrategyContext> {
+    let materials = GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
+        .context("uploading the scene's materials")?;
+    Ok(StrategyContext {
+        gpu: gpu.clone(),
+        bundle: bundle.clone(),
+        scene,
+        materials: Arc::new(materials),
+    })
+}
+
 /// Opens strategy `kind` on the bundle of `ctx`.
 pub fn open(
     ctx: &StrategyContext,
@@ -65,15 +78,7 @@ pub fn evaluate(
             gpu, bundle, &scene, options, progress,
         )?);
     }
-    let ctx = StrategyContext {
-        gpu: gpu.clone(),
-        bundle: bundle.clone(),
-        scene: scene.clone(),
-        materials: Arc::new(
-            GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
-                .context("uploading the scene's materials")?,
-        ),
-    };
+    let ctx = context(gpu, bundle, scene.clone())?;
     let mut strategy = open(&ctx, kind, Default::default())?;
     let render = RenderOptions {
         clear: options.clear,
