@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use lemi_core::bundle::Manifest;
+use lemi_core::cell::CellId;
 use lemi_gpu::{
     BackendChoice, Frame, GpuMaterials, GpuScene, ImpostorRenderer, Presented, RenderOptions,
     Renderer, UploadOptions, WindowSurface,
@@ -305,8 +306,8 @@ struct Viewer {
     hud: Hud,
     show_geometry: bool,
     show_layers: bool,
-    layers: HashMap<String, Option<CellLayers>>,
-    last_cell: Option<Option<String>>,
+    layers: HashMap<CellId, Option<CellLayers>>,
+    last_cell: Option<Option<CellId>>,
     last_ready: bool,
     stalls: u64,
     fps: f64,
@@ -337,7 +338,7 @@ struct App {
     started: Option<Instant>,
     recording: Option<Recording>,
     paths_written: Vec<PathBuf>,
-    cells_seen: Vec<String>,
+    cells_seen: Vec<CellId>,
     last_frame: Option<Frame>,
     last_tick: Option<Instant>,
 }
@@ -582,7 +583,7 @@ impl App {
         for w in &state.warnings {
             eprintln!("warning: {w}");
         }
-        let cell = state.current_cell.clone();
+        let cell = state.current_cell;
         let ready = state.ready.is_some();
         if state.stalled {
             v.stalls += 1;
@@ -621,12 +622,12 @@ impl App {
                 ),
                 (None, _) => println!("cell      none: outside the baked cells, all geometry"),
             }
-            if let Some(id) = &cell {
-                if !self.cells_seen.contains(id) {
-                    self.cells_seen.push(id.clone());
+            if let Some(id) = cell {
+                if !self.cells_seen.contains(&id) {
+                    self.cells_seen.push(id);
                 }
             }
-            v.last_cell = Some(cell.clone());
+            v.last_cell = Some(cell);
             v.last_ready = ready;
         }
         // layer colouring
@@ -637,10 +638,10 @@ impl App {
                 (Some(id), true) => {
                     let manifest = &self.manifest;
                     let bounds = self.scene_bounds;
-                    let entry = v.layers.entry(id.clone()).or_insert_with(|| {
+                    let entry = v.layers.entry(*id).or_insert_with(|| {
                         manifest
                             .grid
-                            .parse_id(id)
+                            .cell_of(*id)
                             .map_err(anyhow::Error::from)
                             .and_then(|c| CellLayers::of(&manifest.params, &c, &bounds))
                             .map_err(|e| eprintln!("warning: layers of cell {id}: {e:#}"))
@@ -685,7 +686,10 @@ impl App {
                 "{:.1} fps  {:.1} ms  {rw}x{rh}",
                 v.fps, v.smoothed_ms
             )),
-            Line::new(format!("cell {}  {what}", cell.as_deref().unwrap_or("-"))),
+            Line::new(format!(
+                "cell {}  {what}",
+                cell.map_or("-".to_string(), |c| c.to_string())
+            )),
             Line::new(format!(
                 "[G] {}  [F] {}  [L] layers {}  stalls {}",
                 if v.show_geometry {
@@ -725,7 +729,7 @@ impl App {
             v.window.set_title(&format!(
                 "lemi view - {:.1} fps - cell {}",
                 v.fps,
-                cell.as_deref().unwrap_or("-")
+                cell.map_or("-".to_string(), |c| c.to_string())
             ));
             v.title_at = Instant::now();
         }

@@ -11,7 +11,9 @@
 //! its wanted cells every frame, least wanted first, makes the eviction order "not wanted this
 //! frame (oldest first), then least wanted".
 
+use std::borrow::Borrow;
 use std::collections::HashMap;
+use std::hash::Hash;
 
 struct Entry<T> {
     value: T,
@@ -21,23 +23,23 @@ struct Entry<T> {
 
 /// An evicted entry.
 #[derive(Debug)]
-pub struct Evicted<T> {
-    pub id: String,
+pub struct Evicted<K, T> {
+    pub id: K,
     pub value: T,
     pub bytes: u64,
 }
 
-/// A byte-bounded LRU cache keyed by cell id.
-pub struct Cache<T> {
+/// A byte-bounded LRU cache keyed by `K` (the streamer's key is the cell id).
+pub struct Cache<K, T> {
     budget: u64,
-    entries: HashMap<String, Entry<T>>,
+    entries: HashMap<K, Entry<T>>,
     tick: u64,
     total: u64,
     evictions: u64,
 }
 
-impl<T> Cache<T> {
-    pub fn new(budget_bytes: u64) -> Cache<T> {
+impl<K: Clone + Eq + Hash, T> Cache<K, T> {
+    pub fn new(budget_bytes: u64) -> Cache<K, T> {
         Cache {
             budget: budget_bytes,
             entries: HashMap::new(),
@@ -69,26 +71,38 @@ impl<T> Cache<T> {
         self.evictions
     }
 
-    pub fn contains(&self, id: &str) -> bool {
+    pub fn contains<Q: Hash + Eq + ?Sized>(&self, id: &Q) -> bool
+    where
+        K: Borrow<Q>,
+    {
         self.entries.contains_key(id)
     }
 
-    pub fn get(&self, id: &str) -> Option<&T> {
+    pub fn get<Q: Hash + Eq + ?Sized>(&self, id: &Q) -> Option<&T>
+    where
+        K: Borrow<Q>,
+    {
         self.entries.get(id).map(|e| &e.value)
     }
 
-    pub fn get_mut(&mut self, id: &str) -> Option<&mut T> {
+    pub fn get_mut<Q: Hash + Eq + ?Sized>(&mut self, id: &Q) -> Option<&mut T>
+    where
+        K: Borrow<Q>,
+    {
         self.entries.get_mut(id).map(|e| &mut e.value)
     }
 
     /// Bytes of one entry.
-    pub fn bytes(&self, id: &str) -> Option<u64> {
+    pub fn bytes<Q: Hash + Eq + ?Sized>(&self, id: &Q) -> Option<u64>
+    where
+        K: Borrow<Q>,
+    {
         self.entries.get(id).map(|e| e.bytes)
     }
 
     /// Inserts (or replaces) `id` as the most recently used entry; returns the replaced value.
     /// Does not evict: call [`Cache::evict_to_budget`].
-    pub fn insert(&mut self, id: String, value: T, bytes: u64) -> Option<T> {
+    pub fn insert(&mut self, id: K, value: T, bytes: u64) -> Option<T> {
         self.tick += 1;
         let old = self.entries.insert(
             id,
@@ -106,7 +120,10 @@ impl<T> Cache<T> {
     }
 
     /// Changes the recorded size of `id` (its value changed state, e.g. uploaded to the GPU).
-    pub fn set_bytes(&mut self, id: &str, bytes: u64) {
+    pub fn set_bytes<Q: Hash + Eq + ?Sized>(&mut self, id: &Q, bytes: u64)
+    where
+        K: Borrow<Q>,
+    {
         if let Some(e) = self.entries.get_mut(id) {
             self.total = self.total - e.bytes + bytes;
             e.bytes = bytes;
@@ -114,7 +131,10 @@ impl<T> Cache<T> {
     }
 
     /// Makes `id` the most recently used entry; false if absent.
-    pub fn touch(&mut self, id: &str) -> bool {
+    pub fn touch<Q: Hash + Eq + ?Sized>(&mut self, id: &Q) -> bool
+    where
+        K: Borrow<Q>,
+    {
         self.tick += 1;
         match self.entries.get_mut(id) {
             Some(e) => {
@@ -125,7 +145,10 @@ impl<T> Cache<T> {
         }
     }
 
-    pub fn remove(&mut self, id: &str) -> Option<T> {
+    pub fn remove<Q: Hash + Eq + ?Sized>(&mut self, id: &Q) -> Option<T>
+    where
+        K: Borrow<Q>,
+    {
         self.entries.remove(id).map(|e| {
             self.total -= e.bytes;
             e.value
@@ -133,12 +156,8 @@ impl<T> Cache<T> {
     }
 
     /// Ids from least to most recently used.
-    pub fn lru_order(&self) -> Vec<&str> {
-        let mut v: Vec<(&str, u64)> = self
-            .entries
-            .iter()
-            .map(|(k, e)| (k.as_str(), e.last_used))
-            .collect();
+    pub fn lru_order(&self) -> Vec<&K> {
+        let mut v: Vec<(&K, u64)> = self.entries.iter().map(|(k, e)| (k, e.last_used)).collect();
         v.sort_by_key(|&(_, t)| t);
         v.into_iter().map(|(k, _)| k).collect()
     }
@@ -146,17 +165,20 @@ impl<T> Cache<T> {
     /// Evicts least recently used entries, never one named in `keep`, until the total is within
     /// the budget or only kept entries remain (a kept cell larger than the budget stays: the
     /// current cell is never evicted). Returns the evicted entries, least recently used first.
-    pub fn evict_to_budget(&mut self, keep: &[&str]) -> Vec<Evicted<T>> {
+    pub fn evict_to_budget<Q: Eq + ?Sized>(&mut self, keep: &[&Q]) -> Vec<Evicted<K, T>>
+    where
+        K: Borrow<Q>,
+    {
         let mut out = Vec::new();
         while self.total > self.budget {
             let victim = self
                 .entries
                 .iter()
-                .filter(|(k, _)| !keep.contains(&k.as_str()))
+                .filter(|(k, _)| !keep.iter().any(|q| (*k).borrow() == *q))
                 .min_by_key(|(_, e)| e.last_used)
                 .map(|(k, _)| k.clone());
             let Some(id) = victim else { break };
-            if let Some(e) = self.entries.remove(&id) {
+            if let Some(e) = self.entries.remove::<K>(&id) {
                 self.total -= e.bytes;
                 self.evictions += 1;
                 out.push(Evicted {
@@ -174,20 +196,20 @@ impl<T> Cache<T> {
 mod tests {
     use super::*;
 
-    fn ids<T>(e: &[Evicted<T>]) -> Vec<&str> {
+    fn ids<T>(e: &[Evicted<String, T>]) -> Vec<&str> {
         e.iter().map(|e| e.id.as_str()).collect()
     }
 
     #[test]
     fn evicts_least_recently_used_within_budget() {
-        let mut c = Cache::new(100);
+        let mut c: Cache<String, i32> = Cache::new(100);
         c.insert("a".into(), 1, 40);
         c.insert("b".into(), 2, 40);
-        assert!(c.evict_to_budget(&[]).is_empty());
+        assert!(c.evict_to_budget::<str>(&[]).is_empty());
         c.insert("c".into(), 3, 40);
         assert_eq!(c.total_bytes(), 120);
         c.touch("a"); // b is now the least recently used
-        let e = c.evict_to_budget(&[]);
+        let e = c.evict_to_budget::<str>(&[]);
         assert_eq!(ids(&e), vec!["b"]);
         assert_eq!(e[0].value, 2);
         assert_eq!(c.total_bytes(), 80);
@@ -202,7 +224,7 @@ mod tests {
         c.set_bytes("c", 500);
         assert!(c.evict_to_budget(&["c"]).is_empty());
         assert_eq!(c.get("c"), Some(&3));
-        assert_eq!(ids(&c.evict_to_budget(&[])), vec!["c"]);
+        assert_eq!(ids(&c.evict_to_budget::<str>(&[])), vec!["c"]);
         assert!(c.is_empty());
         assert_eq!(c.total_bytes(), 0);
         assert_eq!(c.evictions(), 3);
@@ -210,7 +232,7 @@ mod tests {
 
     #[test]
     fn replace_and_remove_keep_the_byte_count() {
-        let mut c = Cache::new(10);
+        let mut c: Cache<String, &str> = Cache::new(10);
         assert_eq!(c.insert("a".into(), "x", 4), None);
         assert_eq!(c.insert("a".into(), "y", 6), Some("x"));
         assert_eq!(c.total_bytes(), 6);

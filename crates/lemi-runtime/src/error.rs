@@ -3,13 +3,15 @@
 
 use std::path::PathBuf;
 
+use lemi_core::cell::CellId;
+
 /// Everything that can go wrong while streaming a bundle.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum RuntimeError {
     /// A cell could not be read, verified, decoded or uploaded; `path` is its file.
     #[error("{}: {message}", path.display())]
     Cell {
-        id: String,
+        id: CellId,
         path: PathBuf,
         message: String,
     },
@@ -29,9 +31,9 @@ pub enum RuntimeError {
 
 impl RuntimeError {
     /// The cell this error is about, if any.
-    pub fn cell_id(&self) -> Option<&str> {
+    pub fn cell_id(&self) -> Option<CellId> {
         match self {
-            RuntimeError::Cell { id, .. } => Some(id),
+            RuntimeError::Cell { id, .. } => Some(*id),
             _ => None,
         }
     }

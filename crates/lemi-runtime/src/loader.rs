@@ -29,7 +29,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use lemi_core::bundle::{Bundle, CellFile, CellHeader, VerifiedCell};
-use lemi_core::cell::{CellError, CellId};
+use lemi_core::cell::CellId;
 use lemi_core::Scene;
 use lemi_gpu::impostor::ImpostorCellData;
 
@@ -55,7 +55,7 @@ impl Default for LoaderOptions {
 
 /// A cell read, verified and decoded, ready for [`lemi_gpu::ImpostorCell::begin_upload`].
 pub struct DecodedCell {
-    pub id: String,
+    pub id: CellId,
     /// The cell file.
     pub path: PathBuf,
     /// The cell's header; its `quads` are in `data` (the header's list is left empty so as not to
@@ -86,17 +86,17 @@ impl std::fmt::Debug for DecodedCell {
 /// One delivered request.
 #[derive(Debug)]
 pub struct Loaded {
-    pub id: String,
+    pub id: CellId,
     pub result: Result<DecodedCell, RuntimeError>,
 }
 
 #[derive(Default)]
 struct State {
     /// Most wanted first.
-    queue: Vec<String>,
-    in_flight: HashSet<String>,
+    queue: Vec<CellId>,
+    in_flight: HashSet<CellId>,
     /// Sent on the channel, not yet received.
-    sent: HashSet<String>,
+    sent: HashSet<CellId>,
     shutdown: bool,
 }
 
@@ -181,15 +181,13 @@ impl Loader {
     /// Replaces the queue with `ids`, most wanted first. Cells already queued, being read, or
     /// delivered but not yet received are not queued again; queued cells not in `ids` are
     /// dropped; repeated ids count once.
-    pub fn want(&self, ids: &[&str]) {
+    pub fn want(&self, ids: &[CellId]) {
         let mut st = self.shared.lock();
         let mut seen = HashSet::new();
-        let queue: Vec<String> = ids
+        let queue: Vec<CellId> = ids
             .iter()
-            .filter(|id| {
-                seen.insert(**id) && !st.in_flight.contains(**id) && !st.sent.contains(**id)
-            })
-            .map(|id| id.to_string())
+            .copied()
+            .filter(|id| seen.insert(*id) && !st.in_flight.contains(id) && !st.sent.contains(id))
             .collect();
         st.queue = queue;
         if !st.queue.is_empty() {
@@ -198,9 +196,9 @@ impl Loader {
     }
 
     /// Whether `id` is queued, being read, or delivered and not yet received.
-    pub fn is_pending(&self, id: &str) -> bool {
+    pub fn is_pending(&self, id: CellId) -> bool {
         let st = self.shared.lock();
-        st.queue.iter().any(|q| q == id) || st.in_flight.contains(id) || st.sent.contains(id)
+        st.queue.contains(&id) || st.in_flight.contains(&id) || st.sent.contains(&id)
     }
 
     /// Cells queued or being read.
@@ -261,7 +259,7 @@ fn worker(shared: &Shared, tx: &Sender<Loaded>) {
                 st = shared.wake.wait(st).unwrap_or_else(|p| p.into_inner());
             }
             let id = st.queue.remove(0);
-            st.in_flight.insert(id.clone());
+            st.in_flight.insert(id);
             id
         };
         let t0 = Instant::now();
@@ -276,7 +274,7 @@ fn worker(shared: &Shared, tx: &Sender<Loaded>) {
             }
         }
         let result =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load(&shared.ctx, &id, t0)))
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| load(&shared.ctx, id, t0)))
                 .unwrap_or_else(|panic| {
                     let what = panic
                         .downcast_ref::<String>()
@@ -285,14 +283,14 @@ fn worker(shared: &Shared, tx: &Sender<Loaded>) {
                         .unwrap_or_else(|| "unknown panic".into());
                     Err(cell_error(
                         &shared.ctx,
-                        &id,
+                        id,
                         format!("decoding failed unexpectedly (a bug in lemi): {what}"),
                     ))
                 });
         {
             let mut st = shared.lock();
             st.in_flight.remove(&id);
-            st.sent.insert(id.clone());
+            st.sent.insert(id);
         }
         if tx.send(Loaded { id, result }).is_err() {
             return;
@@ -300,34 +298,26 @@ fn worker(shared: &Shared, tx: &Sender<Loaded>) {
     }
 }
 
-fn cell_path(ctx: &Context, id: &str) -> PathBuf {
-    match id.parse() {
-        Ok(id) => ctx.bundle.cell_path(id),
-        Err(_) => ctx.bundle.dir().to_path_buf(),
-    }
-}
-
-fn cell_error(ctx: &Context, id: &str, message: String) -> RuntimeError {
+fn cell_error(ctx: &Context, id: CellId, message: String) -> RuntimeError {
     RuntimeError::Cell {
-        id: id.to_string(),
-        path: cell_path(ctx, id),
+        id,
+        path: ctx.bundle.cell_path(id),
         message,
     }
 }
 
 /// Reads, verifies (through the bundle's one reader) and decodes one cell.
-fn load(ctx: &Context, id: &str, t0: Instant) -> Result<DecodedCell, RuntimeError> {
+fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeError> {
     let err = |m: String| cell_error(ctx, id, m);
-    let cell_id: CellId = id.parse().map_err(|e: CellError| err(e.to_string()))?;
     let VerifiedCell { file, entry } =
         ctx.bundle
-            .verified_cell(cell_id)
+            .verified_cell(id)
             .map_err(|e| RuntimeError::Cell {
-                id: id.to_string(),
+                id,
                 path: e.path,
                 message: e.kind.to_string(),
             })?;
-    let path = ctx.bundle.cell_path(cell_id);
+    let path = ctx.bundle.cell_path(id);
     let macros = file.decode_macros().map_err(|e| err(e.to_string()))?;
     let CellFile {
         mut header, near, ..
@@ -339,7 +329,7 @@ fn load(ctx: &Context, id: &str, t0: Instant) -> Result<DecodedCell, RuntimeErro
         ))
     })?;
     Ok(DecodedCell {
-        id: id.to_string(),
+        id,
         path,
         header,
         bytes: data.cpu_bytes(),

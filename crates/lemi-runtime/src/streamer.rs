@@ -34,7 +34,7 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use lemi_core::bundle::{Bundle, Manifest};
-use lemi_core::cell::CellGrid;
+use lemi_core::cell::{CellGrid, CellId};
 use lemi_core::Scene;
 use lemi_gpu::impostor::PendingImpostorCell;
 use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell};
@@ -126,7 +126,7 @@ pub struct FrameState<'a> {
     /// Frame number, from 1.
     pub frame: u64,
     /// The view cell containing the position (`None` outside the grid).
-    pub current_cell: Option<String>,
+    pub current_cell: Option<CellId>,
     /// The current cell's impostors, only when completely uploaded.
     pub ready: Option<&'a ImpostorCell>,
     /// The current cell was not ready when this frame needed it (counted in `stats.stalls`).
@@ -136,9 +136,9 @@ pub struct FrameState<'a> {
     /// Warnings raised this frame (a damaged or mismatched cell, once per cell).
     pub warnings: Vec<String>,
     /// Cells the loader delivered this frame.
-    pub loaded: Vec<String>,
+    pub loaded: Vec<CellId>,
     /// Cells evicted this frame.
-    pub evicted: Vec<String>,
+    pub evicted: Vec<CellId>,
     /// Bytes in the cache at the end of the frame.
     pub cache_bytes: u64,
     /// Texture and geometry bytes uploaded this frame.
@@ -213,15 +213,15 @@ pub struct Streamer {
     grid: CellGrid,
     bundle: PathBuf,
     /// Baked cells: id → manifest file size.
-    baked: HashMap<String, u64>,
+    baked: HashMap<CellId, u64>,
     options: StreamerOptions,
     loader: Loader,
     loader_gone: bool,
-    cache: Cache<Slot>,
+    cache: Cache<CellId, Slot>,
     /// Cells that failed: id → message (naming the file).
-    failed: HashMap<String, String>,
+    failed: HashMap<CellId, String>,
     /// The most bytes each cell was seen to hold (its admission estimate).
-    sizes: HashMap<String, u64>,
+    sizes: HashMap<CellId, u64>,
     stats: StreamStats,
 }
 
@@ -229,7 +229,7 @@ pub struct Streamer {
 #[derive(Default)]
 struct Events {
     warnings: Vec<String>,
-    loaded: Vec<String>,
+    loaded: Vec<CellId>,
     uploaded: u64,
 }
 
@@ -271,7 +271,7 @@ impl Streamer {
             if let Err(err) = g.cell_of(e.id) {
                 return Err(bad(err.to_string()));
             }
-            baked.insert(e.id.to_string(), e.bytes);
+            baked.insert(e.id, e.bytes);
         }
         let grid = manifest.grid.clone();
         let bundle =
@@ -315,21 +315,18 @@ impl Streamer {
     }
 
     /// The cached cells and their states, least recently used first.
-    pub fn cached_cells(&self) -> Vec<(String, CellState)> {
+    pub fn cached_cells(&self) -> Vec<(CellId, CellState)> {
         self.cache
             .lru_order()
             .into_iter()
-            .filter_map(|id| Some((id.to_string(), self.cache.get(id)?.state()?)))
+            .filter_map(|id| Some((*id, self.cache.get(id)?.state()?)))
             .collect()
     }
 
     /// The cells that failed, with their messages (each naming the file), sorted by id.
-    pub fn failed_cells(&self) -> Vec<(String, String)> {
-        let mut v: Vec<(String, String)> = self
-            .failed
-            .iter()
-            .map(|(k, m)| (k.clone(), m.clone()))
-            .collect();
+    pub fn failed_cells(&self) -> Vec<(CellId, String)> {
+        let mut v: Vec<(CellId, String)> =
+            self.failed.iter().map(|(k, m)| (*k, m.clone())).collect();
         v.sort();
         v
     }
@@ -351,17 +348,17 @@ impl Streamer {
     ) -> Result<Vec<String>, RuntimeError> {
         let t0 = Instant::now();
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id().to_string());
+        let current = self.grid.locate(position).map(|c| c.id());
         loop {
             self.receive(&mut ev);
-            let wanted = self.wanted(position, velocity, current.as_deref());
+            let wanted = self.wanted(position, velocity, current);
             self.request(&wanted);
             self.upload(&wanted, u64::MAX, &mut ev);
             let done = wanted.iter().all(|id| {
                 self.failed.contains_key(id) || matches!(self.cache.get(id), Some(Slot::Ready(_)))
             });
             if done {
-                let keep: Vec<&str> = current.as_deref().into_iter().collect();
+                let keep: Vec<&CellId> = current.iter().collect();
                 let evicted = self.cache.evict_to_budget(&keep);
                 self.stats.evictions += evicted.len() as u64;
                 return Ok(ev.warnings);
@@ -401,28 +398,28 @@ impl Streamer {
             self.stats.seconds += dt;
         }
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id().to_string());
+        let current = self.grid.locate(position).map(|c| c.id());
         self.receive(&mut ev);
-        let wanted = self.wanted(position, velocity, current.as_deref());
+        let wanted = self.wanted(position, velocity, current);
         self.request(&wanted);
         self.upload(&wanted, self.options.upload_budget_bytes_per_frame, &mut ev);
 
         let mut stalled = false;
         let mut fallback = None;
-        match current.as_deref() {
+        match current {
             None => {
                 fallback = Some(format!(
                     "the position ({:.2}, {:.2}, {:.2}) is outside the bundle's view cells",
                     position.x, position.y, position.z
                 ))
             }
-            Some(id) if !self.baked.contains_key(id) => {
+            Some(id) if !self.baked.contains_key(&id) => {
                 fallback = Some(format!("cell {id} was not baked into the bundle"))
             }
             Some(id) => {
-                if let Some(m) = self.failed.get(id) {
+                if let Some(m) = self.failed.get(&id) {
                     fallback = Some(m.clone());
-                } else if !matches!(self.cache.get(id), Some(Slot::Ready(_))) {
+                } else if !matches!(self.cache.get(&id), Some(Slot::Ready(_))) {
                     stalled = true;
                     self.stats.stalls += 1;
                     match self.options.stall_policy {
@@ -434,7 +431,7 @@ impl Streamer {
                             self.stats.stall_seconds += t0.elapsed().as_secs_f64();
                         }
                         StallPolicy::Fallback => {
-                            let state = match self.cache.get(id).and_then(Slot::state) {
+                            let state = match self.cache.get(&id).and_then(Slot::state) {
                                 Some(CellState::Uploading { uploaded, total }) => {
                                     format!("uploading, {uploaded} of {total} texture bytes")
                                 }
@@ -450,8 +447,8 @@ impl Streamer {
         if fallback.is_some() {
             self.stats.fallback_frames += 1;
         }
-        let keep: Vec<&str> = current.as_deref().into_iter().collect();
-        let evicted: Vec<String> = self
+        let keep: Vec<&CellId> = current.iter().collect();
+        let evicted: Vec<CellId> = self
             .cache
             .evict_to_budget(&keep)
             .into_iter()
@@ -461,7 +458,7 @@ impl Streamer {
         self.stats.uploaded_bytes += ev.uploaded;
         let cache_bytes = self.cache.total_bytes();
         self.stats.peak_cache_bytes = self.stats.peak_cache_bytes.max(cache_bytes);
-        let ready = match current.as_deref().and_then(|id| self.cache.get(id)) {
+        let ready = match current.and_then(|id| self.cache.get(&id)) {
             Some(Slot::Ready(c)) if fallback.is_none() => Some(&**c),
             _ => None,
         };
@@ -482,7 +479,7 @@ impl Streamer {
 
     /// The cells to have ready, most wanted first: the current cell (if baked and not failed),
     /// then the predicted ones while their estimated sizes fit the cache budget.
-    fn wanted(&self, position: DVec3, velocity: DVec3, current: Option<&str>) -> Vec<String> {
+    fn wanted(&self, position: DVec3, velocity: DVec3, current: Option<CellId>) -> Vec<CellId> {
         let o = &self.options;
         let popts = PredictOptions {
             horizon_seconds: o.horizon_seconds,
@@ -493,12 +490,12 @@ impl Streamer {
         let mut wanted = Vec::new();
         let mut sum = 0u64;
         for p in predict(position, velocity, &self.grid, &popts) {
-            let id = p.cell.id().to_string();
+            let id = p.cell.id();
             if !self.baked.contains_key(&id) || self.failed.contains_key(&id) {
                 continue;
             }
-            let est = self.estimate(&id);
-            if Some(id.as_str()) != current && sum.saturating_add(est) > o.cache_budget_bytes {
+            let est = self.estimate(id);
+            if Some(id) != current && sum.saturating_add(est) > o.cache_budget_bytes {
                 break;
             }
             sum = sum.saturating_add(est);
@@ -509,25 +506,25 @@ impl Streamer {
 
     /// The bytes a cell is expected to hold at its peak: what it was seen to hold, else the
     /// largest cell seen so far, else its file size.
-    fn estimate(&self, id: &str) -> u64 {
-        if let Some(&s) = self.sizes.get(id) {
+    fn estimate(&self, id: CellId) -> u64 {
+        if let Some(&s) = self.sizes.get(&id) {
             return s;
         }
         match self.sizes.values().max() {
             Some(&s) => s,
-            None => self.baked.get(id).copied().unwrap_or(0),
+            None => self.baked.get(&id).copied().unwrap_or(0),
         }
     }
 
     /// Marks the wanted cells used (least wanted first) and asks the loader for the missing ones.
-    fn request(&mut self, wanted: &[String]) {
+    fn request(&mut self, wanted: &[CellId]) {
         for id in wanted.iter().rev() {
             self.cache.touch(id);
         }
-        let missing: Vec<&str> = wanted
+        let missing: Vec<CellId> = wanted
             .iter()
+            .copied()
             .filter(|id| !self.cache.contains(id))
-            .map(String::as_str)
             .collect();
         self.loader.want(&missing);
     }
@@ -550,46 +547,46 @@ impl Streamer {
         match l.result {
             Ok(d) => {
                 self.stats.loads += 1;
-                ev.loaded.push(l.id.clone());
+                ev.loaded.push(l.id);
                 let bytes = d.bytes;
-                self.note_size(&l.id, bytes);
+                self.note_size(l.id, bytes);
                 self.cache.insert(l.id, Slot::Decoded(Box::new(d)), bytes);
             }
-            Err(e) => self.fail(&l.id, e.to_string(), ev),
+            Err(e) => self.fail(l.id, e.to_string(), ev),
         }
     }
 
-    fn fail(&mut self, id: &str, message: String, ev: &mut Events) {
+    fn fail(&mut self, id: CellId, message: String, ev: &mut Events) {
         ev.warnings.push(format!(
             "warning: {message}; cell {id} falls back to geometry"
         ));
         self.stats.failures += 1;
-        self.cache.remove(id);
-        self.failed.insert(id.to_string(), message);
+        self.cache.remove(&id);
+        self.failed.insert(id, message);
     }
 
-    fn note_size(&mut self, id: &str, bytes: u64) {
-        let s = self.sizes.entry(id.to_string()).or_insert(0);
+    fn note_size(&mut self, id: CellId, bytes: u64) {
+        let s = self.sizes.entry(id).or_insert(0);
         *s = (*s).max(bytes);
     }
 
     /// Advances the uploads of the wanted cells in order within `budget` bytes; the first step
     /// always happens.
-    fn upload(&mut self, wanted: &[String], budget: u64, ev: &mut Events) {
+    fn upload(&mut self, wanted: &[CellId], budget: u64, ev: &mut Events) {
         let mut used = 0u64;
         for id in wanted {
             if used > 0 && used >= budget {
                 break;
             }
-            used += self.upload_cell(id, budget.saturating_sub(used), ev);
+            used += self.upload_cell(*id, budget.saturating_sub(used), ev);
         }
         ev.uploaded += used;
     }
 
     /// Advances one cell's upload by up to `budget` bytes (at least one row); returns the bytes
     /// uploaded (texture rows plus the geometry of a begun upload).
-    fn upload_cell(&mut self, id: &str, budget: u64, ev: &mut Events) -> u64 {
-        let Some(slot) = self.cache.get_mut(id) else {
+    fn upload_cell(&mut self, id: CellId, budget: u64, ev: &mut Events) -> u64 {
+        let Some(slot) = self.cache.get_mut(&id) else {
             return 0;
         };
         if matches!(slot, Slot::Ready(_) | Slot::Moving) {
@@ -642,21 +639,18 @@ impl Streamer {
             }
         };
         let bytes = next.bytes();
-        if let Some(slot) = self.cache.get_mut(id) {
+        if let Some(slot) = self.cache.get_mut(&id) {
             *slot = next;
         }
-        self.cache.set_bytes(id, bytes);
+        self.cache.set_bytes(&id, bytes);
         self.note_size(id, bytes);
         used
     }
 
-    fn upload_failed(&mut self, id: &str, e: lemi_gpu::GpuError, ev: &mut Events) {
-        let path = match id.parse() {
-            Ok(id) => self.bundle.join(lemi_core::bundle::cell_file_name(id)),
-            Err(_) => self.bundle.clone(),
-        };
+    fn upload_failed(&mut self, id: CellId, e: lemi_gpu::GpuError, ev: &mut Events) {
+        let path = self.bundle.join(lemi_core::bundle::cell_file_name(id));
         let err = RuntimeError::Cell {
-            id: id.to_string(),
+            id,
             path,
             message: format!("uploading to the GPU failed: {e}"),
         };
@@ -665,13 +659,13 @@ impl Streamer {
 
     /// Waits until the current cell is decoded and finishes its upload (a stall under
     /// [`StallPolicy::Block`]); `Err` with the reason if it fails or the wait times out.
-    fn block_on(&mut self, id: &str, ev: &mut Events) -> Result<(), String> {
+    fn block_on(&mut self, id: CellId, ev: &mut Events) -> Result<(), String> {
         let t0 = Instant::now();
         loop {
-            if let Some(m) = self.failed.get(id) {
+            if let Some(m) = self.failed.get(&id) {
                 return Err(m.clone());
             }
-            match self.cache.get(id) {
+            match self.cache.get(&id) {
                 Some(Slot::Ready(_)) => return Ok(()),
                 Some(_) => {
                     ev.uploaded += self.upload_cell(id, u64::MAX, ev);

@@ -265,8 +265,12 @@ fn pace(start: Instant, frames: usize, dt: f64) {
     }
 }
 
-fn located(p: DVec3) -> Option<String> {
-    grid().locate(p).map(|c| c.id().to_string())
+fn located(p: DVec3) -> Option<CellId> {
+    grid().locate(p).map(|c| c.id())
+}
+
+fn cell_ids(s: &[&str]) -> Vec<CellId> {
+    s.iter().map(|s| id(s)).collect()
 }
 
 fn id(s: &str) -> CellId {
@@ -285,8 +289,8 @@ fn read_cell(bundle: &Path, cell: &str) -> CellFile {
 fn check_ready(f: &FrameState<'_>, p: DVec3, want: &HashMap<String, (usize, u64, u64)>) {
     assert_eq!(f.current_cell, located(p), "frame {}", f.frame);
     if let Some(cell) = f.ready {
-        let id = f.current_cell.as_deref().expect("a ready cell has an id");
-        let (quads, bytes, _) = want[id];
+        let id = f.current_cell.expect("a ready cell has an id").to_string();
+        let (quads, bytes, _) = want[id.as_str()];
         assert_eq!(cell.quad_count(), quads, "frame {}: cell {id}", f.frame);
         assert_eq!(cell.texture_bytes(), bytes, "frame {}: cell {id}", f.frame);
         assert!(f.fallback.is_none());
@@ -345,9 +349,9 @@ fn walk_there_and_back_loads_evicts_reloads_without_stalls() {
         );
         assert!(f.cache_bytes <= budget, "frame {}: {f:?}", f.frame);
         for id in &f.loaded {
-            *loads.entry(id.clone()).or_default() += 1;
+            *loads.entry(id.to_string()).or_default() += 1;
         }
-        evicted.extend(f.evicted.iter().cloned());
+        evicted.extend(f.evicted.iter().map(|c| c.to_string()));
     }
     let stats = st.stats();
     eprintln!(
@@ -601,7 +605,7 @@ fn damaged_and_mismatched_cells_fall_back_and_the_walk_continues() {
         let f = st.frame(p, v, dt);
         check_ready(&f, p, &want);
         warnings.extend(f.warnings.iter().cloned());
-        let id = f.current_cell.clone().expect("inside the row");
+        let id = f.current_cell.expect("inside the row").to_string();
         match (&f.ready, &f.fallback) {
             (Some(_), None) => *shown.entry(id).or_default() += 1,
             (None, Some(reason)) => {
@@ -640,7 +644,10 @@ fn damaged_and_mismatched_cells_fall_back_and_the_walk_continues() {
     // The failures are kept, not retried, and can be listed.
     let failed = st.failed_cells();
     assert_eq!(
-        failed.iter().map(|(id, _)| id.as_str()).collect::<Vec<_>>(),
+        failed
+            .iter()
+            .map(|(id, _)| id.to_string())
+            .collect::<Vec<_>>(),
         vec!["1_0_0", "3_0_0"]
     );
     // A bad cell under the blocking policy is not a stall: nothing was waited for.
@@ -694,21 +701,21 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
         },
     )
     .expect("loader");
-    loader.want(&["2_0_0", "0_0_0", "4_0_0"]);
+    loader.want(&cell_ids(&["2_0_0", "0_0_0", "4_0_0"]));
     std::thread::sleep(Duration::from_millis(50)); // 2_0_0 is being read
                                                    // re-prioritised: 0_0_0 dropped, 4_0_0 first and once, 2_0_0 not read twice
-    loader.want(&["4_0_0", "2_0_0", "4_0_0", "3_0_0", "7_0_0"]);
-    assert!(loader.is_pending("2_0_0") && loader.is_pending("4_0_0"));
-    assert!(!loader.is_pending("0_0_0"));
+    loader.want(&cell_ids(&["4_0_0", "2_0_0", "4_0_0", "3_0_0", "7_0_0"]));
+    assert!(loader.is_pending(id("2_0_0")) && loader.is_pending(id("4_0_0")));
+    assert!(!loader.is_pending(id("0_0_0")));
     let mut got = Vec::new();
     while got.len() < 4 {
         let l = loader
             .recv_timeout(Duration::from_secs(10))
             .expect("loader alive")
             .expect("a delivery within 10 s");
-        got.push((l.id.clone(), l.result));
+        got.push((l.id, l.result));
     }
-    let ids: Vec<&str> = got.iter().map(|(id, _)| id.as_str()).collect();
+    let ids: Vec<String> = got.iter().map(|(id, _)| id.to_string()).collect();
     assert_eq!(ids, vec!["2_0_0", "4_0_0", "3_0_0", "7_0_0"]);
     let decoded = got[0].1.as_ref().expect("2_0_0 decodes");
     assert_eq!(decoded.id, "2_0_0");
@@ -735,7 +742,7 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
         .expect("alive")
         .is_none());
     assert_eq!(loader.pending(), 0);
-    loader.want(&["2_0_0"]);
+    loader.want(&cell_ids(&["2_0_0"]));
     let again = loader
         .recv_timeout(Duration::from_secs(10))
         .expect("alive")
@@ -743,7 +750,7 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
     assert_eq!(again.id, "2_0_0");
     assert!(again.result.is_ok());
     // dropping a loader in the middle of a delay returns promptly
-    loader.want(&["0_0_0"]);
+    loader.want(&cell_ids(&["0_0_0"]));
     let t = Instant::now();
     drop(loader);
     assert!(

@@ -6,6 +6,7 @@
 use std::time::Duration;
 
 use glam::DVec3;
+use lemi_core::cell::CellId;
 use lemi_gpu::{GpuScene, ImpostorRenderer, Renderer, UploadOptions};
 use lemi_runtime::{Streamer, StreamerOptions};
 
@@ -24,7 +25,7 @@ pub struct LayeredStrategy {
     total_triangles: u64,
     texture_bytes: u64,
     uploaded_cells: u64,
-    last_cell: Option<String>,
+    last_cell: Option<CellId>,
 }
 
 impl LayeredStrategy {
@@ -98,7 +99,7 @@ impl Strategy for LayeredStrategy {
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         let state = self.streamer.frame(r.eye, r.velocity, r.dt);
         let warnings = state.warnings.clone();
-        let cell = state.current_cell.clone();
+        let cell = state.current_cell;
         let stalled = state.stalled;
         let cache_bytes = state.cache_bytes;
         let (frame, near, quads, fallback, gpu_ms) = match state.ready {
@@ -123,7 +124,7 @@ impl Strategy for LayeredStrategy {
                 self.renderer.last_gpu_ms(),
             ),
         };
-        self.last_cell = cell.clone();
+        self.last_cell = cell;
         Ok(StrategyFrame {
             frame,
             cell,

@@ -26,6 +26,7 @@ use std::sync::Arc;
 use glam::DVec3;
 use lemi_core::bundle::Bundle;
 use lemi_core::camera::View;
+use lemi_core::cell::CellId;
 use lemi_core::Scene;
 use lemi_gpu::{Frame, Gpu, GpuMaterials, RenderOptions};
 use serde::{Deserialize, Serialize};
@@ -140,7 +141,7 @@ pub struct FrameRequest<'a> {
 pub struct StrategyFrame {
     pub frame: Frame,
     /// Id of the view cell the eye is in, if any.
-    pub cell: Option<String>,
+    pub cell: Option<CellId>,
     /// Near-field triangles drawn (every triangle of the scene on a fallback frame).
     pub near_triangles: u64,
     /// Far-field primitives drawn: quads (layered), billboards (dynamic), warped samples (warp).

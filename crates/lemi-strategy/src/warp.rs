@@ -937,7 +937,7 @@ impl WarpStrategy {
     fn fallback_frame(
         &mut self,
         r: &FrameRequest<'_>,
-        cell: Option<String>,
+        cell: Option<CellId>,
         warnings: Vec<String>,
     ) -> Result<StrategyFrame, StrategyError> {
         let triangles = self.scene.triangle_count();
@@ -984,7 +984,7 @@ impl Strategy for WarpStrategy {
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         self.last_options = Some(*r.options);
         let located = self.bundle.manifest().grid.locate(r.eye);
-        let cell_id = located.as_ref().map(|c| c.id().to_string());
+        let cell_id = located.as_ref().map(|c| c.id());
         let recorded_now = match &located {
             Some(cell) => self.ensure(cell, r.options)?,
             None => None,

@@ -243,7 +243,7 @@ pub fn walk(
     let mut impostor = Vec::with_capacity(frames.len());
     let mut warnings = Vec::new();
     let mut slow_frames = 0u64;
-    let mut last_cell: Option<String> = None;
+    let mut last_cell: Option<lemi_core::cell::CellId> = None;
     let mut regenerations = 0u64;
     let start = Instant::now();
     let t0 = frames.first().map_or(0.0, |f| f.1);
@@ -270,7 +270,7 @@ pub fn walk(
         let cpu_ms = 1e3 * t_frame.elapsed().as_secs_f64();
         warnings.extend(f.warnings.iter().cloned());
         let switch = *index > 0 && f.cell != last_cell;
-        last_cell = f.cell.clone();
+        last_cell = f.cell;
         regenerations += f.regenerations;
         let record = FrameRecord {
             frame: *index,
@@ -285,7 +285,7 @@ pub fn walk(
             } else {
                 f.near_triangles
             },
-            cell: f.cell,
+            cell: f.cell.map(|c| c.to_string()),
             cell_switch: switch,
             stalled: f.stalled,
             cache_bytes: f.cache_bytes,

@@ -806,7 +806,7 @@ impl Strategy for DynamicStrategy {
             self.report.peak_bytes = self.report.peak_bytes.max(cache_bytes);
             return Ok(StrategyFrame {
                 frame,
-                cell: id.map(|i| i.to_string()),
+                cell: id,
                 near_triangles: self.scene.triangle_count(),
                 far_primitives: 0,
                 stalled: true,
@@ -872,7 +872,7 @@ impl Strategy for DynamicStrategy {
         }
         Ok(StrategyFrame {
             frame,
-            cell: id.map(|i| i.to_string()),
+            cell: id,
             near_triangles,
             far_primitives: n_billboards as u64,
             stalled,
