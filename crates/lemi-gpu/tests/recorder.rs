@@ -9,36 +9,10 @@ use lemi_core::camera::View;
 use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::{Face, Material, Mesh, SceneBuilder, Texture};
 use lemi_gpu::{
-    Gpu, GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RenderOptions,
+    GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RenderOptions,
     Renderer, UploadOptions,
 };
-use lemi_testkit::gpu;
-
-fn white_materials(gpu: &Gpu) -> GpuMaterials {
-    let m = Material {
-        name: "white".into(),
-        base_color: [1.0; 4],
-        texture: None,
-    };
-    GpuMaterials::upload(gpu, &[m], &[]).expect("materials")
-}
-
-fn cv(rel: DVec3, normal: [f32; 3]) -> ClipVertex {
-    ClipVertex {
-        rel,
-        normal,
-        uv: [0.0; 2],
-        color: [255.0; 4],
-    }
-}
-
-fn all_runs(vertices: &[ClipVertex]) -> Vec<MaterialRun> {
-    vec![MaterialRun {
-        material: 0,
-        first: 0,
-        count: (vertices.len() / 3) as u32,
-    }]
-}
+use lemi_testkit::{clip_vertex as cv, gpu, one_run as all_runs, wavy_surface, white_materials};
 
 /// A small deterministic generator (xorshift64*), so the tests need no extra crate.
 struct Rng(u64);
@@ -191,30 +165,6 @@ fn coverage_is_conservative_and_tight() {
         }
         assert!(count > 0, "triangle {n} covers nothing");
     }
-}
-
-/// A wavy height field facing `face` around depth 10, crossing the border at depth 10 many times.
-fn wavy_surface(face: Face, cells: u32) -> Vec<ClipVertex> {
-    let point = |a: u32, b: u32| {
-        let s = -0.7 + 1.4 * a as f64 / cells as f64;
-        let t = -0.7 + 1.4 * b as f64 / cells as f64;
-        let d = 10.0 + 1.5 * (5.0 * s).sin() * (4.0 * t).cos();
-        face.point(s, t, d)
-    };
-    let n = [0.3, 0.8, 0.5];
-    let mut out = Vec::new();
-    for b in 0..cells {
-        for a in 0..cells {
-            let (p00, p10, p11, p01) = (
-                point(a, b),
-                point(a + 1, b),
-                point(a + 1, b + 1),
-                point(a, b + 1),
-            );
-            out.extend([p00, p10, p11, p00, p11, p01].map(|p| cv(p, n)));
-        }
-    }
-    out
 }
 
 #[test]
@@ -524,33 +474,4 @@ fn bad_runs_and_parameters_are_errors() {
         .expect("empty layer");
     assert_eq!(empty.covered_count(), 0);
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
-}
-
-/// Throughput at 512² (`cargo test -p lemi-gpu --release --test recorder -- --ignored
-/// --nocapture`); prints, asserts nothing about time.
-#[test]
-#[ignore]
-fn throughput_at_512() {
-    let Some(gpu) = gpu() else { return };
-    let rec = LayerRecorder::new(&gpu, 512).expect("recorder");
-    let mats = white_materials(&gpu);
-    let l = Lighting::default();
-    for cells in [0, 40, 80] {
-        let surface = wavy_surface(Face::PosZ, cells); // 2 cells² triangles
-        let runs = all_runs(&surface);
-        let n = 10;
-        let start = std::time::Instant::now();
-        for _ in 0..n {
-            rec.record(&mats, DVec3::ZERO, Face::PosZ, &surface, &runs, 0.1, &l)
-                .expect("record");
-        }
-        let secs = start.elapsed().as_secs_f64() / n as f64;
-        let tris = surface.len() / 3;
-        eprintln!(
-            "{}: {tris} triangles in {:.2} ms per 512² layer (with readback) = {:.0} triangles/s",
-            gpu.describe(),
-            secs * 1e3,
-            tris as f64 / secs
-        );
-    }
 }

@@ -16,6 +16,7 @@ use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
 use lemi_core::bundle::{BakeParams, LayerTarget, Layering, SceneRef};
 use lemi_core::cell::CellGrid;
+use lemi_core::clip::ClipVertex;
 use lemi_core::{Aabb, Face, Mesh, Scene, SceneBuilder, Vertex};
 use lemi_gpu::{BackendChoice, Gpu};
 
@@ -274,6 +275,63 @@ pub fn ring_positions(
         for a in 0..n {
             let angle = (a as f32 + 0.5 * (m % 2) as f32) * std::f32::consts::TAU / n as f32;
             out.push((m, a, d, d * angle.cos(), d * angle.sin()));
+        }
+    }
+    out
+}
+
+/// One white, untextured material on the GPU (for recording tests).
+pub fn white_materials(gpu: &Gpu) -> lemi_gpu::GpuMaterials {
+    let m = lemi_core::Material {
+        name: "white".into(),
+        base_color: [1.0; 4],
+        texture: None,
+    };
+    match lemi_gpu::GpuMaterials::upload(gpu, &[m], &[]) {
+        Ok(m) => m,
+        Err(e) => panic!("materials: {e}"),
+    }
+}
+
+/// A clipped-triangle vertex at `rel` (relative to the reference viewpoint), white, untextured.
+pub fn clip_vertex(rel: DVec3, normal: [f32; 3]) -> ClipVertex {
+    ClipVertex {
+        rel,
+        normal,
+        uv: [0.0; 2],
+        color: [255.0; 4],
+    }
+}
+
+/// All of `vertices` as one run of material 0.
+pub fn one_run(vertices: &[ClipVertex]) -> Vec<lemi_gpu::MaterialRun> {
+    vec![lemi_gpu::MaterialRun {
+        material: 0,
+        first: 0,
+        count: (vertices.len() / 3) as u32,
+    }]
+}
+
+/// A wavy height field facing `face` around depth 10 (`cells × cells` quads, two triangles
+/// each), crossing the depth 10 many times: a continuous surface over many slab borders.
+pub fn wavy_surface(face: Face, cells: u32) -> Vec<ClipVertex> {
+    let point = |a: u32, b: u32| {
+        let s = -0.7 + 1.4 * a as f64 / cells as f64;
+        let t = -0.7 + 1.4 * b as f64 / cells as f64;
+        let d = 10.0 + 1.5 * (5.0 * s).sin() * (4.0 * t).cos();
+        face.point(s, t, d)
+    };
+    let n = [0.3, 0.8, 0.5];
+    let mut out = Vec::new();
+    for b in 0..cells {
+        for a in 0..cells {
+            let (p00, p10, p11, p01) = (
+                point(a, b),
+                point(a + 1, b),
+                point(a + 1, b + 1),
+                point(a, b + 1),
+            );
+            out.extend([p00, p10, p11, p00, p11, p01].map(|p| clip_vertex(p, n)));
         }
     }
     out
