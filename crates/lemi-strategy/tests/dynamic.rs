@@ -30,11 +30,9 @@ mod common;
 
 use common::{add_box, serial, EYE};
 use glam::DVec3;
-use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, Manifest, SceneRef};
+use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, Manifest};
 use lemi_core::camera::{Camera, View};
-use lemi_core::cell::CellGrid;
-use lemi_core::{Aabb, Scene, SceneBuilder};
+use lemi_core::{Scene, SceneBuilder};
 use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::dynamic::{
     billboard_half_size, resolution_for_angle, texture_resolution, texture_resolution_exact,
@@ -679,121 +677,4 @@ fn bad_options_are_refused_with_clear_errors() {
         let e = o.validate().expect_err(want).to_string();
         assert!(e.contains(want) && e.contains("dynamic"), "{want}: {e}");
     }
-}
-
-/// Timings on a procedural city (not run by default: `cargo test -p lemi-strategy --test dynamic
-/// -- --ignored --nocapture`): walks along the avenue at 640×480, 30 frames per second: 45 frames
-/// at 1.4 m/s, then 30 frames at 10 m/s into the next cell.
-#[test]
-#[ignore]
-fn timings_on_a_city_walk() {
-    let _serial = serial();
-    let Some(gpu) = lemi_testkit::gpu() else {
-        return;
-    };
-    let gpu = Arc::new(gpu);
-    let scene = lemi_scene::builtin::build("city:100k:1").expect("city");
-    let dir = tempfile::tempdir().expect("temp dir");
-    let bundle = dir.path().join("bundle");
-    let region = Aabb::new(DVec3::new(-10.0, 1.7, -5.0), DVec3::new(10.0, 1.7, 5.0));
-    let grid = CellGrid::tile(region, 10.0).expect("grid");
-    let mut p = params();
-    p.resolution = 256;
-    let job = BakeJob {
-        bundle: bundle.clone(),
-        scene: SceneRef {
-            sources: vec!["builtin:city:100k:1".into()],
-            up: "y".into(),
-            fingerprint: "city-100k-1".into(),
-            triangles: scene.triangle_count(),
-        },
-        params: p.clone(),
-        cells: grid.cells(),
-        grid,
-        shard: None,
-    };
-    let t = Instant::now();
-    let baker = Baker::new(&gpu, &scene, p).expect("baker");
-    run(&job, |cell| baker.bake(cell, |_| {}), |_, _, _| {}).expect("bake");
-    eprintln!(
-        "baked {} triangles in {:.1} s",
-        scene.triangle_count(),
-        t.elapsed().as_secs_f64()
-    );
-    let materials =
-        Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("materials"));
-    let scene = Arc::new(scene);
-    let ctx = StrategyContext {
-        gpu: gpu.clone(),
-        bundle: Bundle::open(&bundle).expect("bundle"),
-        scene: scene.clone(),
-        materials,
-    };
-    let t = Instant::now();
-    let mut s = DynamicStrategy::new(&ctx, DynamicOptions::default()).expect("strategy");
-    eprintln!(
-        "{} base objects in {:.0} ms",
-        s.base_objects(),
-        t.elapsed().as_secs_f64() * 1e3
-    );
-    let (w, h) = (640, 480);
-    let mut rows = Vec::new();
-    let mut x = -5.0;
-    for i in 0..75 {
-        x += if i < 45 { 1.4 } else { 10.0 } / 30.0;
-        let eye = DVec3::new(x, EYE, 0.0);
-        let v = Camera::from_yaw_pitch(eye, 90.0, 0.0, FOV, w, h)
-            .expect("camera")
-            .view();
-        let t = Instant::now();
-        let f = frame(&mut s, eye, &v, false);
-        let ms = t.elapsed().as_secs_f64() * 1e3;
-        let st = s.last_frame().clone();
-        rows.push((ms, f.regenerations));
-        if i % 5 == 0 || i == 45 {
-            eprintln!(
-            "frame {i}: cell {:?}, {ms:.0} ms (cell {:.0}, generation {:.0}, upload {:.0}, draw {:.0}), {} regenerated ({:?}), {} objects ({} visible), {} billboards, {} near + {} far-geometry triangles, {} texels, {} MB held",
-            f.cell,
-            st.cell_seconds * 1e3,
-            st.generation_seconds * 1e3,
-            st.upload_seconds * 1e3,
-            st.draw_seconds * 1e3,
-            f.regenerations,
-            st.reasons,
-            st.objects,
-            st.visible,
-            f.far_primitives,
-            f.near_triangles - st.far_geometry_triangles,
-            st.far_geometry_triangles,
-            st.texels,
-            f.cache_bytes >> 20
-        );
-        }
-    }
-    for (name, part) in [("1.4 m/s", &rows[1..45]), ("10 m/s", &rows[45..])] {
-        let n = part.len() as f64;
-        eprintln!(
-            "{name}: {:.0} ms per frame, {:.1} regenerations per frame (mean of {n} frames)",
-            part.iter().map(|r| r.0).sum::<f64>() / n,
-            part.iter().map(|r| r.1 as f64).sum::<f64>() / n
-        );
-    }
-    let r = reference_with(&gpu, &scene, w, h);
-    eprintln!("reference frame: {r:.0} ms; report {:?}", s.report());
-}
-
-fn reference_with(gpu: &Gpu, scene: &Scene, w: u32, h: u32) -> f64 {
-    let full = GpuScene::upload(gpu, scene, &UploadOptions::default()).expect("scene");
-    let renderer = Renderer::new(gpu).expect("renderer");
-    let v = Camera::from_yaw_pitch(DVec3::new(0.0, EYE, 0.0), 90.0, 0.0, FOV, w, h)
-        .expect("camera")
-        .view();
-    renderer
-        .render(&full, &v, &RenderOptions::default())
-        .expect("render");
-    let t = Instant::now();
-    renderer
-        .render(&full, &v, &RenderOptions::default())
-        .expect("render");
-    t.elapsed().as_secs_f64() * 1e3
 }
