@@ -1,0 +1,3 @@
+//! What the lemi-core test suites share.
+
+pub mod synthetic;
