@@ -1251,7 +1251,7 @@ fn quad_alpha(b: &Baked, face: Face, layer: usize, i: u32, j: u32) -> Option<u8>
 ///
 /// `cargo test -p lemi-bake --test no_cracks explain_cracks -- --ignored --nocapture`
 #[test]
-#[ignore]
+#[ignore = "diagnostic for a person explaining crack pixels (SCENE=…, VERBOSE=…); run with -- --ignored --nocapture"]
 fn explain_cracks() {
     let Some(gpu) = gpu() else { return };
     let var = |name: &str| std::env::var(name).ok();

@@ -329,7 +329,7 @@ fn scenes_have_colour_and_texture_variety() {
 /// Draws a scene with a tiny CPU rasterizer (texture × vertex colour × Lambert) into a PNG, for a
 /// person to look at: `LEMI_BUILTIN_PNG=/tmp cargo test -p lemi-scene --test builtin -- --ignored`.
 #[test]
-#[ignore]
+#[ignore = "writes pictures for a person to look at; set LEMI_BUILTIN_PNG=DIR and run with -- --ignored"]
 fn draw_pictures() {
     let Some(dir) = std::env::var_os("LEMI_BUILTIN_PNG") else {
         eprintln!("set LEMI_BUILTIN_PNG to a directory to write pictures");
