@@ -14,8 +14,8 @@ use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use lemi_bake::{BakeJob, Baker, CellOutcome};
-use lemi_core::bundle::{BakeParams, CellStats, LayerTarget, Layering, ParamsError, SceneRef};
-use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
+use lemi_core::bundle::{BakeParams, LayerTarget, Layering, ParamsError, SceneRef};
+use lemi_core::cell::{CellGrid, Shard, ViewCell};
 use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
 use lemi_core::{Aabb, Face};
 use lemi_gpu::{BackendChoice, Gpu};
@@ -194,51 +194,6 @@ pub(crate) fn parse_region(s: &str) -> Result<Aabb, String> {
 
 fn parse_shard(s: &str) -> Result<Shard, String> {
     Shard::parse(s).map_err(|e| e.to_string())
-}
-
-/// Per-cell line of the summary.
-#[derive(serde::Serialize)]
-struct CellSummary {
-    id: CellId,
-    status: &'static str,
-    seconds: f64,
-    bytes: u64,
-    raw_bytes: u64,
-    macro_bytes: u64,
-    png_bytes: u64,
-    far_triangles: u64,
-    near_triangles: u64,
-    submitted_triangles: u64,
-    opaque_texels_recorded: u64,
-    opaque_texels_after_hidden_removal: u64,
-    micro_textures: u64,
-    micro_fill_ratio: f64,
-    macro_textures: u64,
-    /// Seconds per stage.
-    stage_seconds: std::collections::BTreeMap<String, f64>,
-}
-
-impl CellSummary {
-    fn new(id: CellId, status: &'static str, seconds: f64, bytes: u64, s: &CellStats) -> Self {
-        CellSummary {
-            id,
-            status,
-            seconds,
-            bytes,
-            raw_bytes: s.raw_bytes,
-            macro_bytes: s.macro_bytes,
-            png_bytes: s.png_bytes,
-            far_triangles: s.far_triangles,
-            near_triangles: s.near_triangles,
-            submitted_triangles: s.submitted_triangles,
-            opaque_texels_recorded: s.opaque_texels_recorded,
-            opaque_texels_after_hidden_removal: s.opaque_texels_after_hidden_removal,
-            micro_textures: s.micro_textures,
-            micro_fill_ratio: s.micro_fill_ratio,
-            macro_textures: s.macro_textures,
-            stage_seconds: s.seconds.iter().cloned().collect(),
-        }
-    }
 }
 
 /// A bake job built from the flags (`lemi bake`, and `lemi compare` for each layered strategy):
@@ -473,40 +428,14 @@ pub fn run(args: Args) -> Result<()> {
     )?;
     bar.finish_and_clear();
 
-    let mut per_cell = Vec::new();
-    let mut total = CellStats::default();
-    let (mut baked, mut skipped) = (0, 0);
-    for o in &summary.outcomes {
-        match o {
-            CellOutcome::Baked {
-                entry,
-                file,
-                seconds,
-            } => {
-                baked += 1;
-                add(&mut total, &file.header.stats);
-                per_cell.push(CellSummary::new(
-                    entry.id,
-                    "baked",
-                    *seconds,
-                    entry.bytes,
-                    &file.header.stats,
-                ));
-            }
-            CellOutcome::Skipped { entry, stats } => {
-                skipped += 1;
-                add(&mut total, stats);
-                per_cell.push(CellSummary::new(
-                    entry.id,
-                    "skipped (already baked)",
-                    0.0,
-                    entry.bytes,
-                    stats,
-                ));
-            }
-        }
-    }
-    let bytes: u64 = per_cell.iter().map(|c| c.bytes).sum();
+    let report = summary.report();
+    let (per_cell, total, baked, skipped, bytes) = (
+        &report.per_cell,
+        &report.total,
+        report.baked,
+        report.skipped,
+        report.bytes,
+    );
     let (strategy, strategy_note) = strategy_name(&params.layering);
     if args.json {
         let out_json = json!({
@@ -599,27 +528,6 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Adds the statistics of a cell to a running total (seconds by stage name).
-fn add(total: &mut CellStats, s: &CellStats) {
-    total.far_triangles += s.far_triangles;
-    total.near_triangles += s.near_triangles;
-    total.submitted_triangles += s.submitted_triangles;
-    total.raw_bytes += s.raw_bytes;
-    total.opaque_texels_recorded += s.opaque_texels_recorded;
-    total.opaque_texels_after_gap_fill += s.opaque_texels_after_gap_fill;
-    total.opaque_texels_after_hidden_removal += s.opaque_texels_after_hidden_removal;
-    total.micro_textures += s.micro_textures;
-    total.macro_textures += s.macro_textures;
-    total.macro_bytes += s.macro_bytes;
-    total.png_bytes += s.png_bytes;
-    for (k, v) in &s.seconds {
-        match total.seconds.iter_mut().find(|(n, _)| n == k) {
-            Some((_, t)) => *t += v,
-            None => total.seconds.push((k.clone(), *v)),
-        }
-    }
 }
 
 /// Bytes with a binary-ish unit, for humans.

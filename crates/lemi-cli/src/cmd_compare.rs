@@ -19,7 +19,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use lemi_bake::{Baker, CellOutcome};
+use lemi_bake::Baker;
 use lemi_core::cell::CellId;
 use lemi_core::{Aabb, Scene};
 use lemi_eval::{EvalOptions, EvalRun, ViewpointSet};
@@ -131,6 +131,8 @@ struct BakeRow {
     /// Bytes of the cell files.
     bytes: u64,
     warnings: Vec<String>,
+    /// Per cell, what `lemi bake --json` reports for it.
+    per_cell: Vec<lemi_bake::CellReport>,
 }
 
 /// A strategy's evaluation: the bundle totals of `lemi eval --json` without the per-view detail
@@ -393,31 +395,20 @@ fn bake(args: &Args, k: StrategyKind, dir: &Path, gpu: &Gpu) -> Result<BakeRow> 
     let baker = Baker::new(gpu, &prepared.scene, prepared.job.params.clone())?;
     let prepare_seconds = t.elapsed().as_secs_f64();
     let summary = lemi_bake::run(&prepared.job, |cell| baker.bake(cell, |_| {}), |_, _, _| {})?;
-    let (mut baked, mut skipped, mut bytes) = (0, 0, 0);
-    for o in &summary.outcomes {
-        match o {
-            CellOutcome::Baked { entry, .. } => {
-                baked += 1;
-                bytes += entry.bytes;
-            }
-            CellOutcome::Skipped { entry, .. } => {
-                skipped += 1;
-                bytes += entry.bytes;
-            }
-        }
-    }
+    let report = summary.report();
     Ok(BakeRow {
         bundle: dir.to_path_buf(),
         strategy: k,
         adapter: gpu.info().name.clone(),
         cells: summary.outcomes.len(),
-        baked,
-        skipped,
+        baked: report.baked,
+        skipped: report.skipped,
         seconds: summary.seconds,
         load_seconds: prepared.load_seconds,
         prepare_seconds,
-        bytes,
+        bytes: report.bytes,
         warnings: prepared.warnings,
+        per_cell: report.per_cell,
     })
 }
 
