@@ -446,9 +446,9 @@ fn walk(
     let dir = args.out.join(format!("walk-{}", k.name()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     path.write(&dir.join("path.json"))?;
-    let ctx = crate::strategy::context(gpu, bundle, scene.clone())?;
+    let ctx = lemi_strategy::StrategyContext::new(gpu.clone(), bundle.clone(), scene.clone())?;
     let streamer = streamer_options(512, 8192, 12.0, StallArg::Block);
-    let mut strategy = crate::strategy::open(&ctx, kind, streamer)?;
+    let mut strategy = lemi_strategy::open(&ctx, kind, streamer)?;
     let mut run = lemi_walk::walk(
         strategy.as_mut(),
         path,
@@ -486,7 +486,8 @@ fn eval(
         ..Default::default()
     };
     let t = Instant::now();
-    let run: EvalRun = crate::strategy::evaluate(gpu, bundle, scene, kind, &options, |_, _, _| {})?;
+    let run: EvalRun =
+        lemi_eval::evaluate_strategy(gpu, bundle, scene, kind, &options, |_, _, _| {})?;
     let seconds = t.elapsed().as_secs_f64();
     let dir = args.out.join(format!("eval-{}", k.name()));
     let report = lemi_eval::write_report(&dir, &run.result, &run.worst)?;

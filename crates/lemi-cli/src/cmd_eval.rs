@@ -128,7 +128,8 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_message(what.to_string());
     };
     let t = std::time::Instant::now();
-    let run = crate::strategy::evaluate(&gpu, &bundle, Arc::new(scene), kind, &options, progress)?;
+    let run =
+        lemi_eval::evaluate_strategy(&gpu, &bundle, Arc::new(scene), kind, &options, progress)?;
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();
     let dir = args

@@ -142,7 +142,7 @@ pub fn run(args: Args) -> Result<()> {
         materials,
     };
     let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
-    let mut strategy = crate::strategy::open(
+    let mut strategy = lemi_strategy::open(
         &ctx,
         kind,
         streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),

@@ -38,7 +38,7 @@ pub use run::{
     ViewpointSet,
 };
 pub use stats::{Histogram, PixelErrorStats};
-pub use strategy_cells::StrategyCells;
+pub use strategy_cells::{evaluate_strategy, StrategyCells};
 
 /// Everything that can go wrong while evaluating or writing a report.
 #[derive(Debug, thiserror::Error)]

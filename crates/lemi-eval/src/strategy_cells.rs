@@ -76,3 +76,33 @@ impl CellRenderer for StrategyCells<'_> {
         f32::INFINITY
     }
 }
+
+/// The certificate of strategy `kind` on `bundle`: layered bundles through
+/// [`crate::evaluate_bundle`] (their own texels' depths), the others through the strategy
+/// ([`StrategyCells`]); `progress(done, total, what)` as there.
+pub fn evaluate_strategy(
+    gpu: &std::sync::Arc<lemi_gpu::Gpu>,
+    bundle: &lemi_core::bundle::Bundle,
+    scene: std::sync::Arc<lemi_core::Scene>,
+    kind: lemi_strategy::StrategyKind,
+    options: &crate::EvalOptions,
+    progress: impl FnMut(usize, usize, &str),
+) -> Result<crate::EvalRun, EvalError> {
+    if kind.is_layered() {
+        return crate::evaluate_bundle(gpu, bundle, &scene, options, progress);
+    }
+    let job = |what: &str| {
+        let what = what.to_string();
+        move |e: lemi_strategy::StrategyError| EvalError::Job(format!("{what}: {e}"))
+    };
+    let ctx = lemi_strategy::StrategyContext::new(gpu.clone(), bundle.clone(), scene.clone())
+        .map_err(job("preparing the strategy"))?;
+    let mut strategy =
+        lemi_strategy::open(&ctx, kind, Default::default()).map_err(job("opening the strategy"))?;
+    let render = RenderOptions {
+        clear: options.clear,
+        ..Default::default()
+    };
+    let mut cells = StrategyCells::new(strategy.as_mut(), render);
+    crate::evaluate_with(gpu, bundle, &scene, options, &mut cells, progress)
+}

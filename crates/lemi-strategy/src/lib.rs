@@ -203,3 +203,41 @@ pub trait Strategy {
     /// Totals so far.
     fn report(&self) -> StrategyReport;
 }
+
+impl StrategyContext {
+    /// The context of `bundle` and the scene it was baked from, with the scene's materials
+    /// uploaded to `gpu`.
+    pub fn new(
+        gpu: Arc<Gpu>,
+        bundle: Bundle,
+        scene: Arc<Scene>,
+    ) -> Result<StrategyContext, StrategyError> {
+        let materials = Arc::new(GpuMaterials::upload(
+            &gpu,
+            &scene.materials,
+            &scene.textures,
+        )?);
+        Ok(StrategyContext {
+            gpu,
+            bundle,
+            scene,
+            materials,
+        })
+    }
+}
+
+/// Opens strategy `kind` on the bundle of `ctx` with each strategy's default options
+/// (`streamer`: how the layered strategies stream their cells).
+pub fn open(
+    ctx: &StrategyContext,
+    kind: StrategyKind,
+    streamer: lemi_runtime::StreamerOptions,
+) -> Result<Box<dyn Strategy>, StrategyError> {
+    Ok(match kind {
+        StrategyKind::Lemi | StrategyKind::Cubemap | StrategyKind::Equidistant => {
+            Box::new(layered::LayeredStrategy::new(ctx, kind, streamer)?)
+        }
+        StrategyKind::Warp => Box::new(warp::WarpStrategy::new(ctx, Default::default())?),
+        StrategyKind::Dynamic => Box::new(dynamic::DynamicStrategy::new(ctx, Default::default())?),
+    })
+}
