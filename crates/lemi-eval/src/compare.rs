@@ -153,16 +153,7 @@ pub fn layered_crack_tolerance<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn frame(w: u32, h: u32, rgb: [u8; 3], depth: f32) -> Frame {
-        let n = (w * h) as usize;
-        Frame {
-            width: w,
-            height: h,
-            rgba: (0..n).flat_map(|_| [rgb[0], rgb[1], rgb[2], 255]).collect(),
-            depth: vec![depth; n],
-        }
-    }
+    use crate::image_metrics::tests::frame;
 
     #[test]
     fn side_by_side_marks_cracks_red_and_counts_like_the_metrics() {

@@ -371,10 +371,11 @@ pub fn crack_pixels(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn frame(w: u32, h: u32, rgb: [u8; 3], depth: f32) -> Frame {
+    /// A `w × h` frame of one colour at one depth.
+    pub(crate) fn frame(w: u32, h: u32, rgb: [u8; 3], depth: f32) -> Frame {
         let n = (w * h) as usize;
         Frame {
             width: w,
