@@ -37,7 +37,8 @@ pub mod texture;
 pub use cell_recorder::{CellRecorder, RecordError, Recording};
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
 pub use impostor::{
-    ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, QUAD_ALPHA_CUTOFF,
+    ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, DEFAULT_PAGE_SIDE,
+    QUAD_ALPHA_CUTOFF,
 };
 pub use recorder::{LayerFrame, LayerRecorder, MaterialRun};
 pub use renderer::{

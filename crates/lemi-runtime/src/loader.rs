@@ -42,6 +42,10 @@ pub struct LoaderOptions {
     pub threads: usize,
     /// Artificial delay before reading each cell (for tests of slow storage).
     pub delay: Duration,
+    /// Largest texture side of the adapter the cells are drawn on: the atlas pages of a cell's
+    /// macro-textures are laid out for it ([`ImpostorCellData::prepare_for`]). The streamer sets
+    /// it from its GPU.
+    pub texture_side: u32,
 }
 
 impl Default for LoaderOptions {
@@ -49,6 +53,7 @@ impl Default for LoaderOptions {
         LoaderOptions {
             threads: 1,
             delay: Duration::ZERO,
+            texture_side: lemi_gpu::DEFAULT_PAGE_SIDE,
         }
     }
 }
@@ -105,6 +110,7 @@ struct Context {
     bundle: Bundle,
     scene: Arc<Scene>,
     delay: Duration,
+    texture_side: u32,
 }
 
 struct Shared {
@@ -149,6 +155,7 @@ impl Loader {
                 bundle,
                 scene,
                 delay: options.delay,
+                texture_side: options.texture_side,
             },
         });
         let (tx, results) = mpsc::channel();
@@ -323,7 +330,8 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
         mut header, near, ..
     } = file;
     let quads = std::mem::take(&mut header.quads);
-    let data = ImpostorCellData::prepare(&ctx.scene, &near, &quads, macros).map_err(|e| {
+    let data = ImpostorCellData::prepare_for(&ctx.scene, &near, &quads, macros, ctx.texture_side)
+        .map_err(|e| {
         err(format!(
             "does not fit the scene it is drawn with: {e} (is it the scene the bundle was baked from?)"
         ))

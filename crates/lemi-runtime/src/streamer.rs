@@ -276,7 +276,14 @@ impl Streamer {
         let grid = manifest.grid.clone();
         let bundle =
             Bundle::from_manifest(bundle_dir, manifest).map_err(|e| bad(e.kind.to_string()))?;
-        let loader = Loader::spawn(bundle, scene, options.loader.clone())?;
+        let loader = Loader::spawn(
+            bundle,
+            scene,
+            LoaderOptions {
+                texture_side: gpu.limits().max_texture_dimension_2d,
+                ..options.loader.clone()
+            },
+        )?;
         Ok(Streamer {
             gpu,
             materials,

@@ -394,7 +394,11 @@ fn slow_loading_stalls_and_every_waiting_frame_counts_once() {
             horizon_seconds: 0.5,
             max_speed: 10.0,
             stall_policy: policy,
-            loader: LoaderOptions { threads: 1, delay },
+            loader: LoaderOptions {
+                threads: 1,
+                delay,
+                ..Default::default()
+            },
             ..Default::default()
         };
         let mut st = streamer(&s, &fx.bundle, options);
@@ -698,6 +702,7 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
         LoaderOptions {
             threads: 1,
             delay: Duration::from_millis(150),
+            ..Default::default()
         },
     )
     .expect("loader");

@@ -9,7 +9,7 @@
 //
 // The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle); the sampler
 // binding stays in the layout for filtering modes to come.
-// Group 1 holds the macro-texture at bindings 3 and 4 so that they never alias the material
+// Group 1 holds the atlas page of macro-textures at bindings 3 and 4 so that they never alias the material
 // bindings 0..=2 the shading module declares (unused here).
 
 struct QuadIn {
@@ -18,6 +18,8 @@ struct QuadIn {
     @location(1) uv: vec2<f32>,
     // the quad's texel rectangle [x0, y0, x1, y1] in the macro-texture
     @location(2) rect: vec4<f32>,
+    // the macro-texture's top-left texel in its atlas page
+    @location(3) offset: vec2<u32>,
 };
 
 struct QuadOut {
@@ -25,6 +27,7 @@ struct QuadOut {
     @location(0) uv: vec2<f32>,
     @location(1) view_depth: f32,
     @location(2) @interpolate(flat) rect: vec4<f32>,
+    @location(3) @interpolate(flat) offset: vec2<u32>,
 };
 
 struct QuadFragmentOut {
@@ -43,15 +46,18 @@ fn vs_quad(v: QuadIn) -> QuadOut {
     out.clip = globals.clip_from_rel * vec4<f32>(rel, 1.0);
     out.uv = v.uv;
     out.rect = v.rect;
+    out.offset = v.offset;
     out.view_depth = dot(globals.depth_axis.xyz, rel);
     return out;
 }
 
 // Nearest texel, clamped to the quad's own rectangle: the quad is grown a little beyond it
-// (QUAD_GROWTH_TEXELS) and must never fetch a neighbour's texels or the transparent gap.
+// (QUAD_GROWTH_TEXELS) and must never fetch a neighbour's texels or the transparent gap. The
+// texel is found in the macro-texture's own coordinates, then moved to its place in the atlas
+// page by an integer offset, so the fetch is exactly the macro-texture's texel.
 fn quad_texel(in: QuadOut) -> vec4<f32> {
     let texel = clamp(floor(in.uv), in.rect.xy, in.rect.zw - vec2<f32>(1.0, 1.0));
-    return textureLoad(macro_texture, vec2<i32>(texel), 0);
+    return textureLoad(macro_texture, vec2<i32>(texel) + vec2<i32>(in.offset), 0);
 }
 
 fn quad_output(t: vec4<f32>, in: QuadOut) -> QuadFragmentOut {

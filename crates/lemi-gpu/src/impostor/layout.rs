@@ -9,14 +9,20 @@ use lemi_core::classify::TriRef;
 use lemi_core::compress::MacroTexture;
 use lemi_core::{Mesh, Scene};
 
+use super::atlas::{self, Atlas};
 #[cfg(doc)]
 use super::{ImpostorCell, PendingImpostorCell};
 use crate::GpuError;
 
+/// The atlas page side [`ImpostorCellData::prepare`] packs for: wgpu's default texture limit,
+/// which every adapter but downlevel ones (WebGL2: 2048) has.
+pub const DEFAULT_PAGE_SIDE: u32 = 8192;
+
 /// Quad fragments whose macro-texel alpha (0..=1) is below this are discarded.
 pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
 
-/// One quad corner on the GPU: world position and macro-texture coordinates (20 bytes).
+/// One quad corner on the GPU (44 bytes): world position, macro-texture coordinates, the quad's
+/// rectangle in its macro-texture and where that macro-texture lies in its atlas page.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub(super) struct QuadVertex {
@@ -26,12 +32,16 @@ pub(super) struct QuadVertex {
     /// The quad's texel rectangle in the macro-texture `[x0, y0, x1, y1]` (same for all four
     /// vertices): the fragment shader clamps its fetch to it.
     pub(super) rect: [f32; 4],
+    /// The macro-texture's top-left texel in its atlas page: added to the clamped texel as an
+    /// integer, so the texel fetched is exactly the one of the macro-texture on its own.
+    pub(super) offset: [u32; 2],
 }
 
-const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 3] = wgpu::vertex_attr_array![
+const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     0 => Float32x3,
     1 => Float32x2,
     2 => Float32x4,
+    3 => Uint32x2,
 ];
 
 /// How far (in texels of its layer) every quad is grown beyond its texel rectangle, so that
@@ -49,32 +59,37 @@ pub(super) fn quad_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
     }
 }
 
-/// One draw call: quads of one macro-texture, a contiguous index range, drawn with the opaque
-/// pipeline (every texel of every quad passes the alpha test) or the alpha-tested one.
+/// One draw call: the quads of one cube face, one kind and one atlas page, a contiguous index
+/// range, drawn with the opaque pipeline (every texel of every quad passes the alpha test) or the
+/// alpha-tested one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct MacroDraw {
-    pub(super) macro_index: u32,
+pub(super) struct QuadDraw {
+    pub(super) page: u32,
     pub(super) first_index: u32,
     pub(super) index_count: u32,
     pub(super) opaque: bool,
 }
 
-/// The quads of a cell on the CPU: shared vertex/index arrays and the draw calls in draw order.
+/// The quads of a cell on the CPU: shared vertex/index arrays, the draw calls in draw order and
+/// where the macro-textures go in the atlas pages.
 pub(super) struct QuadGeometry {
     pub(super) vertices: Vec<QuadVertex>,
     pub(super) indices: Vec<u32>,
-    pub(super) draws: Vec<MacroDraw>,
+    pub(super) draws: Vec<QuadDraw>,
+    pub(super) atlas: Atlas,
     /// The box around each draw call's quads, for culling.
     pub(super) bounds: Vec<Bounds>,
     /// Quads drawn without the alpha test.
     pub(super) opaque_quads: usize,
 }
 
-/// Checks the quads against `macros` and builds their [`QuadGeometry`] (see the module docs for
-/// the order).
+/// Checks the quads against `macros`, packs the macro-textures into atlas pages of at most
+/// `max_side` texels per side and builds their [`QuadGeometry`] (see the module docs for the
+/// order).
 pub(super) fn quad_geometry(
     quads: &[Quad],
     macros: &[MacroTexture],
+    max_side: u32,
 ) -> Result<QuadGeometry, GpuError> {
     if quads.len() > (u32::MAX / 6) as usize {
         return Err(GpuError::Limit(format!(
@@ -116,10 +131,13 @@ pub(super) fn quad_geometry(
                 .is_some_and(|m| rect_opaque(m, q.rect))
         })
         .collect();
-    let order = draw_order(quads, &opaque);
+    let sizes: Vec<(u32, u32)> = macros.iter().map(|m| (m.width, m.height)).collect();
+    let atlas = atlas::pack(&sizes, max_side)?;
+    let place = |q: &Quad| atlas.places.get(q.macro_index as usize).copied();
+    let order = draw_order(quads, &opaque, |q| place(q).map_or(0, |p| p.page));
     let mut vertices = Vec::with_capacity(4 * quads.len());
     let mut indices = Vec::with_capacity(6 * quads.len());
-    let mut draws: Vec<MacroDraw> = Vec::new();
+    let mut draws: Vec<QuadDraw> = Vec::new();
     let mut bounds: Vec<Bounds> = Vec::new();
     let mut run = None;
     for &k in &order {
@@ -141,11 +159,15 @@ pub(super) fn quad_geometry(
         let [x, y, rw, rh] = q.rect;
         let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
         let first = indices.len() as u32;
-        let key = (q.layer, q.face, opaque[k], q.macro_index);
+        let Some(at) = place(q) else {
+            continue; // checked above: every quad's macro-texture exists
+        };
+        let offset = [at.x, at.y];
+        let key = (q.face, opaque[k], at.page);
         if run != Some(key) {
             run = Some(key);
-            draws.push(MacroDraw {
-                macro_index: q.macro_index,
+            draws.push(QuadDraw {
+                page: at.page,
                 first_index: first,
                 index_count: 0,
                 opaque: opaque[k],
@@ -164,6 +186,7 @@ pub(super) fn quad_geometry(
                 position: position.to_array(),
                 uv: [t.x as f32, t.y as f32],
                 rect,
+                offset,
             });
         }
         indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
@@ -173,6 +196,7 @@ pub(super) fn quad_geometry(
         vertices,
         indices,
         draws,
+        atlas,
         bounds,
         opaque_quads: opaque.iter().filter(|&&o| o).count(),
     })
@@ -250,19 +274,25 @@ fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
     })
 }
 
-/// The order quads are drawn in, as indices into `quads` (see the module docs): nearest layer
-/// first (a quad's `layer` counts far to near) so that depth rejection skips what nearer layers
-/// hide; within a layer by face (so that a draw call's quads lie in one plane and a view culls
-/// the faces it does not see), the opaque quads before the alpha-tested ones, and by
-/// macro-texture, so that each (layer, face, kind, macro-texture) run is one draw call; ties keep
-/// the cell's order.
-fn draw_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
+/// The order quads are drawn in, as indices into `quads` (see the module docs): by face (so that
+/// a view culls the faces it does not see), the opaque quads before the alpha-tested ones, by
+/// atlas page (`page_of`), so that each (face, kind, page) run is one draw call; within a run the
+/// nearest layer first (a quad's `layer` counts far to near) so that depth rejection skips what
+/// nearer layers hide, then by macro-texture; ties keep the cell's order.
+///
+/// Two quads of one layer are drawn in the same relative order as when every (layer, face, kind,
+/// macro-texture) run was its own draw call: face, then kind, then macro-texture (pages aside,
+/// which only a cell larger than one page has). Only such quads can meet at bit-equal depths
+/// (where their grown rims overlap), where the one drawn first shows; quads of different layers
+/// never do, so the order of layers between kinds changes no pixel.
+fn draw_order(quads: &[Quad], opaque: &[bool], page_of: impl Fn(&Quad) -> u32) -> Vec<usize> {
     let mut order: Vec<usize> = (0..quads.len()).collect();
     order.sort_by_key(|&k| {
         (
-            std::cmp::Reverse(quads[k].layer),
             quads[k].face,
             !opaque[k],
+            page_of(&quads[k]),
+            std::cmp::Reverse(quads[k].layer),
             quads[k].macro_index,
         )
     });
@@ -292,6 +322,18 @@ impl ImpostorCellData {
         quads: &[Quad],
         macros: Vec<MacroTexture>,
     ) -> Result<ImpostorCellData, GpuError> {
+        Self::prepare_for(scene, near, quads, macros, DEFAULT_PAGE_SIDE)
+    }
+
+    /// [`ImpostorCellData::prepare`] with atlas pages of at most `max_side` texels per side (the
+    /// adapter's texture side; [`ImpostorCell::begin_upload`] checks the pages against it).
+    pub fn prepare_for(
+        scene: &Scene,
+        near: &[[u32; 2]],
+        quads: &[Quad],
+        macros: Vec<MacroTexture>,
+        max_side: u32,
+    ) -> Result<ImpostorCellData, GpuError> {
         let near: Vec<TriRef> = near.iter().map(|&pair| TriRef::from(pair)).collect();
         let near_meshes = scene.extract(&near)?;
         for (i, m) in macros.iter().enumerate() {
@@ -305,7 +347,7 @@ impl ImpostorCellData {
                 )));
             }
         }
-        let geometry = quad_geometry(quads, &macros)?;
+        let geometry = quad_geometry(quads, &macros, max_side)?;
         Ok(ImpostorCellData {
             near_meshes,
             geometry,
@@ -401,7 +443,7 @@ mod tests {
     }
 
     #[test]
-    fn quads_draw_nearest_layer_first_opaque_ones_first_by_macro() {
+    fn quads_draw_by_face_and_kind_nearest_layer_first() {
         let mut m0 = opaque_macro(8, 8);
         set_alpha(&mut m0, 3, 3, 0);
         set_alpha(&mut m0, 5, 0, 128); // 128/255 ≥ 0.5: kept
@@ -420,39 +462,37 @@ mod tests {
             vertices: v,
             indices: i,
             draws,
+            atlas,
             bounds,
             opaque_quads,
-        } = quad_geometry(&quads, &macros).expect("valid quads");
+        } = quad_geometry(&quads, &macros, 64).expect("valid quads");
         assert_eq!(bounds.len(), draws.len());
         assert_eq!(opaque_quads, 4);
         assert_eq!(v.len(), 24);
         assert_eq!(i.len(), 36);
-        let d = |macro_index, first_index, quads: u32, opaque| MacroDraw {
-            macro_index,
+        let d = |first_index, quads: u32, opaque| QuadDraw {
+            page: 0,
             first_index,
             index_count: 6 * quads,
             opaque,
         };
-        // layer 5 (quad 1); layer 3 (quad 2); layer 1: opaque quads 0, 4 (macro 0) and 5
-        // (macro 1), then the alpha-tested quad 3.
-        assert_eq!(
-            draws,
-            vec![
-                d(1, 0, 1, true),
-                d(0, 6, 1, false),
-                d(0, 12, 2, true),
-                d(1, 24, 1, true),
-                d(0, 30, 1, false),
-            ]
-        );
-        // the layer-3 quad (second): rect [2, 2, 2, 2] of 8x8, texel coordinates, grown by
+        // one face: the opaque quads 1 (layer 5), 0, 4 (layer 1, macro 0) and 5 (layer 1, macro
+        // 1) in one draw, then the alpha-tested quads 2 (layer 3) and 3 (layer 1) in another
+        assert_eq!(draws, vec![d(0, 4, true), d(24, 2, false)]);
+        // both macro-textures side by side on one page
+        assert_eq!(atlas.pages, vec![(16, 8)]);
+        assert_eq!(v[0].offset, [8, 0]);
+        assert_eq!(v[4].offset, [0, 0]);
+        assert_eq!(v[12].offset, [8, 0]);
+        // the layer-3 quad (fifth): rect [2, 2, 2, 2] of 8x8, texel coordinates, grown by
         // QUAD_GROWTH_TEXELS on every side; the fetch is clamped to the rectangle
         let g = QUAD_GROWTH_TEXELS as f32;
-        assert_eq!(v[4].uv, [2.0 - g, 2.0 - g]);
-        assert_eq!(v[6].uv, [4.0 + g, 4.0 + g]);
-        assert_eq!(v[4].rect, [2.0, 2.0, 4.0, 4.0]);
-        assert_eq!(v[8].rect, [0.0, 0.0, 2.0, 2.0]);
-        assert_eq!(v[12].rect, [4.0, 0.0, 6.0, 1.0]);
+        assert_eq!(v[16].uv, [2.0 - g, 2.0 - g]);
+        assert_eq!(v[18].uv, [4.0 + g, 4.0 + g]);
+        assert_eq!(v[16].rect, [2.0, 2.0, 4.0, 4.0]);
+        assert_eq!(v[4].rect, [0.0, 0.0, 2.0, 2.0]);
+        assert_eq!(v[8].rect, [4.0, 0.0, 6.0, 1.0]);
+        assert_eq!(v[20].rect, [6.0, 0.0, 7.0, 1.0]);
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
     }
 
@@ -497,9 +537,14 @@ mod tests {
             [0, 0, 8, 9],
             [u32::MAX, 0, 2, 2],
         ] {
-            let r = quad_geometry(&[quad(0, 0, rect)], &macros);
+            let r = quad_geometry(&[quad(0, 0, rect)], &macros, 64);
             assert!(matches!(r, Err(GpuError::Invalid(_))), "{rect:?}");
         }
-        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros).is_ok());
+        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 64).is_ok());
+        // a macro-texture larger than the pages may be
+        assert!(matches!(
+            quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 4),
+            Err(GpuError::Limit(_))
+        ));
     }
 }

@@ -29,19 +29,29 @@
 //!   writes exactly what the alpha-tested pipeline would, but lets the rasterizer test and write
 //!   depth before shading (Mesa's llvmpipe tests early with `discard` too, but then writes depth
 //!   late and loses its fast paths); about 60 % of a city cell's quads are opaque.
-//! - One vertex/index buffer holds all quads of a cell, in draw order: nearest layer first (a
+//! - Macro-textures are packed once more at upload, into a few large textures (atlas pages; one
+//!   for any cell of ordinary size, see `atlas`): a quad's vertices carry its macro-texture's
+//!   offset in the page, added to the clamped texel as an integer, so the texel fetched is
+//!   exactly the one of the macro-texture on its own.
+//! - One vertex/index buffer holds all quads of a cell, in draw order: by cube face, the opaque
+//!   quads before the alpha-tested ones, by atlas page; within that the nearest layer first (a
 //!   quad's `layer` counts far to near), so that depth rejection skips the far texels nearer
-//!   layers hide; within a layer the opaque quads first, by macro-texture, then the alpha-tested
-//!   ones; ties keep the cell's order. Each run of one layer, kind and macro-texture is one draw
-//!   call (a few per layer). The near geometry is drawn before all quads.
+//!   layers hide, then by macro-texture; ties keep the cell's order. Each run of one face, kind
+//!   and page is one draw call: at most 12 per page whatever the layer and macro-texture counts
+//!   (8 for a cell of 4 faces), so the far field's cost is its pixels, not how the bake cut it
+//!   (GI 2002 sec. 1: the rendering speed of the far field decoupled from its complexity). The
+//!   near geometry is drawn before all quads.
 //! - Draw order decides only between fragments of equal depth: where the grown rims
 //!   ([`QUAD_GROWTH_TEXELS`]) of two adjacent quads of one layer overlap and their interpolated
-//!   depths are bit-equal, the quad drawn first shows its edge texel. Putting opaque quads first
-//!   changed that choice for about 0.02 % of the pixels of a city frame (at most 0.05 %) compared
-//!   with the earlier macro-texture-then-layer order: each such pixel keeps its depth bits and
-//!   shows the edge texel of the adjacent quad of the same layer instead, one texel over (which
-//!   neighbour wins an exact tie was arbitrary before too). Everything else (the linear path,
-//!   the opaque pipeline, culling) changes no pixel.
+//!   depths are bit-equal, the quad drawn first shows its edge texel. Quads of different layers
+//!   never meet at equal depth, and two quads of one layer keep the relative order they had when
+//!   every (layer, face, kind, macro-texture) run was a draw call of its own (face, kind,
+//!   macro-texture), so merging the runs changed no pixel (checked on city bundles with
+//!   `examples/frame_timing --check`). Putting opaque quads first (earlier) changed that choice
+//!   for about 0.02 % of the pixels of a city frame compared with the macro-texture-then-layer
+//!   order before it: each such pixel shows the edge texel of the adjacent quad of the same layer
+//!   instead, one texel over. Everything else (the linear path, the opaque pipeline, culling)
+//!   changes no pixel.
 //! - Culling: each draw call keeps the box around its quads; a frame skips the draw calls whose
 //!   box lies wholly outside the view frustum (with a margin), which cannot change the image. A
 //!   view along a cube axis then draws about one face of quads.
@@ -53,7 +63,7 @@
 //!   [`ImpostorRenderer::last_gpu_ms`].
 //!
 //! The module's parts: `layout` on the CPU (quad geometry, draw order, opaque quads, culling
-//! boxes, near geometry: [`ImpostorCellData`]), `upload` to the GPU (one path, incremental or run
+//! boxes, near geometry: [`ImpostorCellData`]), `atlas` (the pages' packing), `upload` to the GPU (one path, incremental or run
 //! to completion: [`ImpostorCell`], [`PendingImpostorCell`]) and `render` ([`ImpostorRenderer`]).
 //!
 //! [`GpuGeometry::upload`]: crate::GpuGeometry::upload
@@ -61,12 +71,13 @@
 //! [`RenderOptions::clear`]: crate::RenderOptions::clear
 //! [`Scene::extract`]: lemi_core::Scene::extract
 
+mod atlas;
 mod layout;
 mod render;
 #[cfg(test)]
 mod test_support;
 mod upload;
 
-pub use layout::{ImpostorCellData, QUAD_ALPHA_CUTOFF, QUAD_GROWTH_TEXELS};
+pub use layout::{ImpostorCellData, DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF, QUAD_GROWTH_TEXELS};
 pub use render::ImpostorRenderer;
 pub use upload::{ImpostorCell, PendingImpostorCell};

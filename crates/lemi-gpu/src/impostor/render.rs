@@ -250,11 +250,11 @@ impl ImpostorRenderer {
             }
         }
         for d in &cell.draws {
-            if cell.macro_groups.get(d.macro_index as usize).is_none() {
+            if cell.page_groups.get(d.page as usize).is_none() {
                 return Err(GpuError::Invalid(format!(
-                    "quads use macro-texture {} but only {} were uploaded",
-                    d.macro_index,
-                    cell.macro_groups.len()
+                    "quads use atlas page {} but only {} were uploaded",
+                    d.page,
+                    cell.page_groups.len()
                 )));
             }
         }
@@ -349,7 +349,7 @@ impl ImpostorRenderer {
                 pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
                 let (mut pipeline, mut bound) = (None, None);
                 for (d, b) in cell.draws.iter().zip(&cell.bounds) {
-                    let Some(g) = cell.macro_groups.get(d.macro_index as usize) else {
+                    let Some(g) = cell.page_groups.get(d.page as usize) else {
                         continue;
                     };
                     if b.outside(&view_proj) {
@@ -363,9 +363,9 @@ impl ImpostorRenderer {
                         });
                         pipeline = Some(d.opaque);
                     }
-                    if bound != Some(d.macro_index) {
+                    if bound != Some(d.page) {
                         pass.set_bind_group(1, g, &[]);
-                        bound = Some(d.macro_index);
+                        bound = Some(d.page);
                     }
                     pass.draw_indexed(d.first_index..d.first_index + d.index_count, 0, 0..1);
                 }

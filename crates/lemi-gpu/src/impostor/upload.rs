@@ -15,13 +15,15 @@ use lemi_core::compress::MacroTexture;
 use lemi_core::Scene;
 use wgpu::util::DeviceExt;
 
-use super::layout::{Bounds, ImpostorCellData, MacroDraw, QuadGeometry};
+use super::atlas::{Atlas, Place};
+use super::layout::{Bounds, ImpostorCellData, QuadDraw, QuadGeometry};
 #[cfg(doc)]
 use super::ImpostorRenderer;
 use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
 use crate::{Gpu, GpuError};
 
-/// Group 1 of the quad pipeline: macro-texture (binding 3) and its nearest sampler (binding 4).
+/// Group 1 of the quad pipeline: an atlas page of macro-textures (binding 3) and its nearest
+/// sampler (binding 4).
 /// Created by both [`ImpostorCell::begin_upload`] and [`ImpostorRenderer::new`]; wgpu deduplicates
 /// equal layouts, and WebGPU makes equal layouts compatible in any case.
 pub(super) fn macro_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
@@ -48,20 +50,23 @@ pub(super) fn macro_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     })
 }
 
-/// GPU resources of one baked cell: its near geometry, its macro-textures and its quads.
+/// GPU resources of one baked cell: its near geometry, its macro-textures (packed into atlas
+/// pages) and its quads.
 pub struct ImpostorCell {
     pub(super) near: GpuScene,
     /// Vertex and index buffer of all quads; `None` without quads.
     pub(super) quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
-    /// One bind group per macro-texture, in the cell's order.
-    pub(super) macro_groups: Vec<wgpu::BindGroup>,
-    /// Draw calls in draw order (nearest layer first).
-    pub(super) draws: Vec<MacroDraw>,
+    /// One bind group per atlas page.
+    pub(super) page_groups: Vec<wgpu::BindGroup>,
+    /// Draw calls in draw order (by face and kind).
+    pub(super) draws: Vec<QuadDraw>,
     /// The box around each draw call's quads.
     pub(super) bounds: Vec<Bounds>,
     quad_count: usize,
     opaque_quads: usize,
     texture_bytes: u64,
+    /// Bytes of the atlas pages on the GPU.
+    page_bytes: u64,
     /// The macro-textures' format ([`macro_format`]).
     pub(super) macro_format: wgpu::TextureFormat,
 }
@@ -77,7 +82,7 @@ impl ImpostorCell {
     /// adapter's texture limit are [`GpuError::Limit`]).
     ///
     /// All input is checked before any GPU work. This is the incremental upload run to
-    /// completion ([`ImpostorCellData::prepare`], [`ImpostorCell::begin_upload`], one
+    /// completion ([`ImpostorCellData::prepare_for`] this adapter, [`ImpostorCell::begin_upload`], one
     /// [`PendingImpostorCell::upload_step`] without a budget, [`PendingImpostorCell::finish`]); it
     /// copies `macros` once, and frees each copy as soon as its texture is written.
     pub fn upload(
@@ -88,7 +93,8 @@ impl ImpostorCell {
         quads: &[Quad],
         macros: &[MacroTexture],
     ) -> Result<ImpostorCell, GpuError> {
-        let data = ImpostorCellData::prepare(scene, near, quads, macros.to_vec())?;
+        let side = gpu.limits().max_texture_dimension_2d;
+        let data = ImpostorCellData::prepare_for(scene, near, quads, macros.to_vec(), side)?;
         let mut pending = ImpostorCell::begin_upload(gpu, materials, data)?;
         pending.upload_step(gpu, u64::MAX)?;
         pending.finish()
@@ -104,13 +110,25 @@ impl ImpostorCell {
         self.quad_count
     }
 
-    /// Bytes of macro-texture data on the GPU (RGBA8, no mipmaps).
+    /// Bytes of macro-texture data (RGBA8, no mipmaps), what the cell uploads.
     pub fn texture_bytes(&self) -> u64 {
         self.texture_bytes
     }
 
-    /// Draw calls the quads take: one per run of quads of one layer, one kind (opaque or
-    /// alpha-tested) and one macro-texture.
+    /// Bytes of the atlas pages holding the macro-textures on the GPU (at least
+    /// [`ImpostorCell::texture_bytes`]: the packing's gaps are resident too).
+    pub fn resident_texture_bytes(&self) -> u64 {
+        self.page_bytes
+    }
+
+    /// Atlas pages (textures) holding the macro-textures; 1 for any cell up to a page.
+    pub fn atlas_pages(&self) -> usize {
+        self.page_groups.len()
+    }
+
+    /// Draw calls the quads take at most (a view skips the faces it does not see): one per run of
+    /// quads of one cube face, one kind (opaque or alpha-tested) and one atlas page, so at most
+    /// 12 per page.
     pub fn quad_draw_calls(&self) -> usize {
         self.draws.len()
     }
@@ -137,24 +155,25 @@ pub(super) fn macro_format(device: &wgpu::Device) -> wgpu::TextureFormat {
 }
 
 /// A cell whose upload is in progress: the geometry is on the GPU, the macro-textures are written
-/// row by row by [`PendingImpostorCell::upload_step`]. It cannot be drawn (there is no way to hand
-/// it to [`ImpostorRenderer`]); [`PendingImpostorCell::finish`] turns a complete one into an
-/// [`ImpostorCell`].
+/// row by row into their atlas pages by [`PendingImpostorCell::upload_step`]. It cannot be drawn
+/// (there is no way to hand it to [`ImpostorRenderer`]); [`PendingImpostorCell::finish`] turns a
+/// complete one into an [`ImpostorCell`].
 ///
-/// A macro-texture's GPU texture is created when its first rows are written and its CPU copy is
-/// freed when its last row is, so a cell in transit holds at most one macro-texture twice.
+/// A page's texture is created when the first rows of a macro-texture on it are written, and a
+/// macro-texture's CPU copy is freed when its last row is, so a cell in transit holds at most one
+/// macro-texture twice.
 pub struct PendingImpostorCell {
     near: GpuScene,
     quad_buffers: Option<(wgpu::Buffer, wgpu::Buffer)>,
     layout: wgpu::BindGroupLayout,
     sampler: wgpu::Sampler,
-    /// One bind group per macro-texture begun so far, in order.
-    macro_groups: Vec<wgpu::BindGroup>,
-    /// The texture being written (the last one of `macro_groups`), until it is complete.
-    current: Option<wgpu::Texture>,
+    /// Where the macro-textures go.
+    atlas: Atlas,
+    /// The pages' textures and bind groups created so far, by page.
+    pages: Vec<Option<(wgpu::Texture, wgpu::BindGroup)>>,
     /// CPU copies; a completed macro-texture's `rgba` is emptied.
     macros: Vec<MacroTexture>,
-    draws: Vec<MacroDraw>,
+    draws: Vec<QuadDraw>,
     bounds: Vec<Bounds>,
     quad_count: usize,
     opaque_quads: usize,
@@ -189,6 +208,14 @@ impl ImpostorCell {
                 )));
             }
         }
+        for (p, &(w, h)) in data.geometry.atlas.pages.iter().enumerate() {
+            if w > max_dim || h > max_dim {
+                return Err(GpuError::Limit(format!(
+                    "atlas page {p} is {w}x{h}, larger than this adapter's textures ({max_dim} per side): \
+                     prepare the cell for this adapter (ImpostorCellData::prepare_for)"
+                )));
+            }
+        }
         let texture_bytes = data.texture_bytes();
         let ImpostorCellData {
             near_meshes,
@@ -197,6 +224,7 @@ impl ImpostorCell {
                     vertices,
                     indices,
                     draws,
+                    atlas,
                     bounds,
                     opaque_quads,
                 },
@@ -248,8 +276,8 @@ impl ImpostorCell {
             quad_buffers,
             layout,
             sampler,
-            macro_groups: Vec::with_capacity(macros.len()),
-            current: None,
+            pages: atlas.pages.iter().map(|_| None).collect(),
+            atlas,
             macros,
             draws,
             bounds,
@@ -264,9 +292,9 @@ impl ImpostorCell {
         })
     }
 
-    /// Bytes this cell holds on the GPU: macro-textures plus vertex and index buffers.
+    /// Bytes this cell holds on the GPU: atlas pages plus vertex and index buffers.
     pub fn gpu_bytes(&self) -> u64 {
-        self.texture_bytes + buffer_bytes(&self.quad_buffers, &self.near)
+        self.page_bytes + buffer_bytes(&self.quad_buffers, &self.near)
     }
 }
 
@@ -303,42 +331,26 @@ impl PendingImpostorCell {
                 if rows == 0 {
                     break;
                 }
-                if self.current.is_none() {
-                    let label = format!("lemi macro-texture {}", self.next_macro);
-                    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-                        label: Some(&label),
-                        size: wgpu::Extent3d {
-                            width: m.width,
-                            height: m.height,
-                            depth_or_array_layers: 1,
-                        },
-                        mip_level_count: 1,
-                        sample_count: 1,
-                        dimension: wgpu::TextureDimension::D2,
-                        format: self.macro_format,
-                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                        view_formats: &[],
-                    });
-                    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-                    self.macro_groups.push(gpu.device.create_bind_group(
-                        &wgpu::BindGroupDescriptor {
-                            label: Some(&label),
-                            layout: &self.layout,
-                            entries: &[
-                                wgpu::BindGroupEntry {
-                                    binding: 3,
-                                    resource: wgpu::BindingResource::TextureView(&view),
-                                },
-                                wgpu::BindGroupEntry {
-                                    binding: 4,
-                                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                                },
-                            ],
-                        },
+                let Some(&Place { page, x, y }) = self.atlas.places.get(self.next_macro) else {
+                    break;
+                };
+                let Some(slot) = self.pages.get_mut(page as usize) else {
+                    break;
+                };
+                if slot.is_none() {
+                    let Some(&(width, height)) = self.atlas.pages.get(page as usize) else {
+                        break;
+                    };
+                    *slot = Some(create_page(
+                        gpu,
+                        page,
+                        (width, height),
+                        self.macro_format,
+                        &self.layout,
+                        &self.sampler,
                     ));
-                    self.current = Some(texture);
                 }
-                let Some(texture) = self.current.as_ref() else {
+                let Some((texture, _)) = slot.as_ref() else {
                     break;
                 };
                 let start = (self.next_row as u64 * row_bytes) as usize;
@@ -348,8 +360,8 @@ impl PendingImpostorCell {
                         texture,
                         mip_level: 0,
                         origin: wgpu::Origin3d {
-                            x: 0,
-                            y: self.next_row,
+                            x,
+                            y: y + self.next_row,
                             z: 0,
                         },
                         aspect: wgpu::TextureAspect::All,
@@ -370,9 +382,8 @@ impl PendingImpostorCell {
                 self.uploaded += rows as u64 * row_bytes;
                 self.next_row += rows;
                 if self.next_row == m.height {
-                    // Complete: the GPU texture stays alive through its bind group.
+                    // Complete: the page stays alive through its bind group.
                     self.macros[self.next_macro].rgba = Vec::new();
-                    self.current = None;
                     self.next_macro += 1;
                     self.next_row = 0;
                 }
@@ -406,15 +417,13 @@ impl PendingImpostorCell {
         self.geometry_bytes
     }
 
-    /// Bytes held on the GPU so far: geometry buffers plus the macro-textures created so far.
+    /// Bytes held on the GPU so far: geometry buffers plus the atlas pages created so far.
     pub fn gpu_bytes(&self) -> u64 {
-        let textures: u64 = self
-            .macros
-            .iter()
-            .take(self.macro_groups.len())
-            .map(|m| 4 * m.width as u64 * m.height as u64)
+        let pages: u64 = (self.atlas.pages.iter().zip(&self.pages))
+            .filter(|(_, made)| made.is_some())
+            .map(|(&(w, h), _)| 4 * w as u64 * h as u64)
             .sum();
-        self.geometry_bytes + textures
+        self.geometry_bytes + pages
     }
 
     /// Bytes of macro-texture data still held in main memory.
@@ -424,24 +433,71 @@ impl PendingImpostorCell {
 
     /// The drawable cell; [`GpuError::Invalid`] if some macro-texture is not completely written.
     pub fn finish(self) -> Result<ImpostorCell, GpuError> {
-        if !self.is_complete() || self.macro_groups.len() != self.macros.len() {
+        let page_bytes = 4 * self.atlas.texels();
+        let page_groups: Option<Vec<wgpu::BindGroup>> = (self.pages.into_iter())
+            .map(|p| p.map(|(_, g)| g))
+            .collect();
+        let (true, Some(page_groups)) = (self.next_macro >= self.macros.len(), page_groups) else {
             return Err(GpuError::Invalid(format!(
                 "the cell's upload is incomplete: {} of {} macro-texture bytes written",
                 self.uploaded, self.texture_bytes
             )));
-        }
+        };
         Ok(ImpostorCell {
             near: self.near,
             quad_buffers: self.quad_buffers,
-            macro_groups: self.macro_groups,
+            page_groups,
             draws: self.draws,
             bounds: self.bounds,
             quad_count: self.quad_count,
             opaque_quads: self.opaque_quads,
             texture_bytes: self.texture_bytes,
+            page_bytes,
             macro_format: self.macro_format,
         })
     }
+}
+
+/// An atlas page's texture and its bind group (group 1 of the quad pipelines, [`macro_layout`]).
+fn create_page(
+    gpu: &Gpu,
+    page: u32,
+    (width, height): (u32, u32),
+    format: wgpu::TextureFormat,
+    layout: &wgpu::BindGroupLayout,
+    sampler: &wgpu::Sampler,
+) -> (wgpu::Texture, wgpu::BindGroup) {
+    let label = format!("lemi macro-texture atlas page {page}");
+    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(&label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(&label),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(&view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    });
+    (texture, group)
 }
 
 #[cfg(test)]
@@ -487,7 +543,10 @@ mod tests {
             let mut pending =
                 ImpostorCell::begin_upload(&gpu, materials.clone(), data).expect("begin");
             assert_eq!(pending.texture_bytes(), total);
-            assert_eq!(pending.geometry_bytes() + total, one_shot.gpu_bytes());
+            assert_eq!(
+                pending.geometry_bytes() + one_shot.resident_texture_bytes(),
+                one_shot.gpu_bytes()
+            );
             assert!(!pending.is_complete());
             let mut steps = 0;
             loop {
