@@ -1,31 +1,21 @@
 //! [`StrategyKind::for_bundle`]: which strategy a bundle can serve, checked on the manifest alone.
 
-use lemi_core::bundle::{
-    LayerTarget, Layering, Manifest, SceneRef, BUNDLE_VERSION, MANIFEST_FORMAT,
-};
+use lemi_core::bundle::{BakeParams, LayerTarget, Layering, Manifest, SceneRef};
 use lemi_strategy::{StrategyError, StrategyKind};
-use lemi_testkit::{row_of_cells, small_params};
+use lemi_testkit::{manifest_without_cells, row_of_cells, small_params};
 
 fn manifest(layering: Layering) -> Manifest {
-    let params = lemi_core::bundle::BakeParams {
+    let params = BakeParams {
         layering,
         ..small_params(32, LayerTarget::Layers(4))
     };
-    Manifest {
-        format: MANIFEST_FORMAT.into(),
-        version: BUNDLE_VERSION,
-        generator: "test".into(),
-        scene: SceneRef {
-            sources: vec!["builtin:test".into()],
-            up: "y".into(),
-            fingerprint: "0".into(),
-            triangles: 0,
-        },
-        params_hash: params.hash(),
-        params,
-        grid: row_of_cells(1),
-        cells: Vec::new(),
-    }
+    let scene = SceneRef {
+        sources: vec!["builtin:test".into()],
+        up: "y".into(),
+        fingerprint: "0".into(),
+        triangles: 0,
+    };
+    manifest_without_cells(params, row_of_cells(1), scene)
 }
 
 #[test]
