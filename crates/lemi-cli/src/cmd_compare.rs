@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use lemi_compare::{BakeRow, CompareError, CompareOptions};
+use lemi_compare::{BakeRow, CompareOptions};
 use lemi_core::cell::CellId;
 use lemi_core::Aabb;
 use lemi_eval::{EvalOptions, ViewpointSet};
@@ -147,10 +147,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     };
     let bake_one = |k: StrategyKind, dir: &Path| bake(&args, k, dir, &gpu);
-    let done = lemi_compare::run(&gpu, &options, bake_one, say).map_err(|e| match e {
-        CompareError::NoStrategies | CompareError::Repeated(_) => anyhow!("--strategies: {e}"),
-        e => e.into(),
-    })?;
+    let done = lemi_compare::run(&gpu, &options, bake_one, say)?;
     if let Some(e) = &done.plot_error {
         eprintln!("warning: no plot ({e})");
     }
