@@ -1,13 +1,14 @@
-//! Opening a baked bundle for rendering: the manifest, the scene it was baked from (from the
-//! manifest's sources or `--scene`, checked against the fingerprint).
+//! Opening a baked bundle for rendering ([`lemi_scene::open_bundle`]) with a progress bar, its
+//! errors worded for `--scene`.
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use lemi_core::bundle::{manifest_path, Bundle};
-use lemi_core::{Scene, UpAxis};
+use lemi_core::Scene;
+use lemi_scene::OpenBundleError;
 
-use crate::load::{load_scene, SceneArgs, UpArg};
+use crate::load::{print_warnings, progress_bar};
 
 /// Whether `path` is a bundle directory (holds `manifest.json`).
 pub fn is_bundle(path: &str) -> bool {
@@ -17,39 +18,31 @@ pub fn is_bundle(path: &str) -> bool {
 /// The bundle and the scene it was baked from. `scene_override`: scene inputs to use instead of
 /// the manifest's sources; they must have the bundle's fingerprint.
 pub fn open(bundle: &Path, scene_override: &[String], quiet: bool) -> Result<(Bundle, Scene)> {
-    let bundle = Bundle::open(bundle)?;
-    let manifest = bundle.manifest();
-    let up = if manifest.scene.up == "z" {
-        UpArg::Z
-    } else {
-        UpArg::Y
-    };
-    let sources = if scene_override.is_empty() {
-        manifest.scene.sources.clone()
-    } else {
-        scene_override.to_vec()
-    };
-    let fp = lemi_scene::fingerprint(&sources, UpAxis::from(up)).with_context(|| {
-        format!(
+    let (bar, progress) = progress_bar(quiet);
+    let opened = lemi_scene::open_bundle(bundle, scene_override, Some(progress));
+    bar.finish_and_clear();
+    let opened = opened.map_err(|e| match e {
+        OpenBundleError::Fingerprint {
+            bundle,
+            sources,
+            source,
+        } => anyhow::Error::new(source).context(format!(
             "fingerprinting the scene of {} ({}); pass --scene if it moved",
-            bundle.dir().display(),
+            bundle.display(),
             sources.join(" ")
-        )
-    })?;
-    bundle.expect_scene(&fp).with_context(|| {
-        format!(
+        )),
+        OpenBundleError::WrongScene {
+            bundle,
+            sources,
+            source,
+        } => anyhow::Error::new(source).context(format!(
             "the scene {} is not the one {} was baked from; pass the original scene with --scene, \
              or bake again",
             sources.join(" "),
-            bundle.dir().display()
-        )
+            bundle.display()
+        )),
+        e => e.into(),
     })?;
-    let (scene, _) = load_scene(
-        &SceneArgs {
-            scenes: sources,
-            up,
-        },
-        quiet,
-    )?;
-    Ok((bundle, scene))
+    print_warnings(&opened.report);
+    Ok((opened.bundle, opened.scene))
 }

@@ -13,11 +13,6 @@
 //! down/up (flying), F fly/walk (walking keeps the eye height), G impostors/all geometry, L layer
 //! colouring, R start/stop recording, Esc quit. Every change of state is printed to stdout.
 
-#[path = "view/hud.rs"]
-mod hud;
-#[path = "view/layers.rs"]
-mod layers;
-
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -39,9 +34,9 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use hud::{Hud, Line};
-use layers::CellLayers;
 use lemi_walk::controls::{FlyCamera, Held, MoveMode, Recording};
+use lemi_walk::hud::{Hud, Line};
+use lemi_walk::layer_tint::{self, CellLayers};
 
 /// Open an interactive window on a bundle: fly/walk through it, HUD, toggles, path recording.
 #[derive(clap::Args)]
@@ -643,14 +638,17 @@ impl App {
                             .grid
                             .cell_of(*id)
                             .map_err(anyhow::Error::from)
-                            .and_then(|c| CellLayers::of(&manifest.params, &c, &bounds))
+                            .and_then(|c| {
+                                CellLayers::of(&manifest.params, &c, &bounds)
+                                    .map_err(anyhow::Error::from)
+                            })
                             .map_err(|e| eprintln!("warning: layers of cell {id}: {e:#}"))
                             .ok()
                     });
                     if let Some(l) = entry {
                         let s = l.tint(&camera, &mut frame.rgba, &frame.depth);
-                        let n = l.max_layers.min(layers::PALETTE.len());
-                        legend = (0..n).map(layers::layer_color).collect();
+                        let n = l.max_layers.min(layer_tint::PALETTE.len());
+                        legend = (0..n).map(layer_tint::layer_color).collect();
                         let shown = s.per_layer.iter().filter(|&&n| n > 0).count();
                         layer_note = format!(
                             "layers: {} per face ({shown} in view), colours far to near{}",

@@ -36,6 +36,21 @@ impl From<UpArg> for UpAxis {
 /// Loads the scene, showing a progress bar on stderr when it is a terminal; returns the scene and
 /// the load time in seconds.
 pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)> {
+    let (bar, progress) = progress_bar(quiet);
+    let options = lemi_scene::LoadOptions {
+        up: args.up.into(),
+        progress: Some(progress),
+    };
+    let t = Instant::now();
+    let (scene, report) = lemi_scene::import::load_with_report(&args.scenes, &options)
+        .with_context(|| format!("loading {}", args.scenes.join(" ")))?;
+    bar.finish_and_clear();
+    print_warnings(&report);
+    Ok((scene, t.elapsed().as_secs_f64()))
+}
+
+/// The spinner of a scene load (hidden if `quiet`) and the progress callback that drives it.
+pub fn progress_bar(quiet: bool) -> (ProgressBar, lemi_scene::ProgressFn) {
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -47,20 +62,17 @@ pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)>
     );
     bar.set_message("loading");
     let cb_bar = bar.clone();
-    let options = lemi_scene::LoadOptions {
-        up: args.up.into(),
-        progress: Some(std::sync::Arc::new(move |what: &str, done, total| {
-            cb_bar.set_message(what.to_string());
-            cb_bar.set_length(total);
-            cb_bar.set_position(done);
-        })),
-    };
-    let t = Instant::now();
-    let (scene, report) = lemi_scene::import::load_with_report(&args.scenes, &options)
-        .with_context(|| format!("loading {}", args.scenes.join(" ")))?;
-    bar.finish_and_clear();
+    let progress = std::sync::Arc::new(move |what: &str, done, total| {
+        cb_bar.set_message(what.to_string());
+        cb_bar.set_length(total);
+        cb_bar.set_position(done);
+    });
+    (bar, progress)
+}
+
+/// Prints the import's warnings on stderr.
+pub fn print_warnings(report: &lemi_scene::import::ImportReport) {
     for w in &report.warnings {
         eprintln!("warning: {w}");
     }
-    Ok((scene, t.elapsed().as_secs_f64()))
 }

@@ -2,13 +2,16 @@
 //!
 //! `SCENE` arguments are a file (`.gltf`, `.glb`, `.obj`, `.ply`, `.ply.gz`), a directory (every
 //! supported file below it, recursively) or a built-in spec `builtin:NAME[:triangles[:seed]]` with
-//! `NAME` one of `city`, `terrain`, `forest`.
+//! `NAME` one of `city`, `terrain`, `forest`. [`open_bundle`] opens a baked bundle with the scene it
+//! was baked from (checked against the bundle's scene fingerprint).
 
 pub mod builtin;
+mod bundle;
 mod error;
 mod fingerprint;
 pub mod import;
 
+pub use bundle::{open_bundle, OpenBundleError, OpenedBundle};
 pub use error::SceneError;
 pub use fingerprint::fingerprint;
 

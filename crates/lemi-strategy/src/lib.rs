@@ -79,6 +79,27 @@ impl StrategyKind {
             StrategyKind::Lemi | StrategyKind::Cubemap | StrategyKind::Equidistant
         )
     }
+
+    /// The strategy to run on the bundle of `manifest`: `requested` if given and the bundle can
+    /// serve it, else the strategy the bundle was baked for ([`layered::bundle_strategy`]). A
+    /// layered strategy needs a bundle baked for it; `warp` and `dynamic` take their cells and
+    /// near lists from a `lemi` bundle.
+    pub fn for_bundle(
+        manifest: &lemi_core::bundle::Manifest,
+        requested: Option<StrategyKind>,
+    ) -> Result<StrategyKind, StrategyError> {
+        let baked = layered::bundle_strategy(manifest);
+        let Some(requested) = requested else {
+            return Ok(baked);
+        };
+        if requested.is_layered() && requested != baked {
+            return Err(StrategyError::NotBakedFor { requested, baked });
+        }
+        if !requested.is_layered() && baked != StrategyKind::Lemi {
+            return Err(StrategyError::NeedsLemiBundle { requested, baked });
+        }
+        Ok(requested)
+    }
 }
 
 impl std::fmt::Display for StrategyKind {
@@ -94,6 +115,18 @@ pub enum StrategyError {
         "unknown strategy `{0}`: the strategies are lemi, cubemap, equidistant, warp, dynamic"
     )]
     UnknownStrategy(String),
+    /// A layered strategy asked of a bundle baked for another one.
+    #[error("{requested}: this bundle was baked for `{baked}`")]
+    NotBakedFor {
+        requested: StrategyKind,
+        baked: StrategyKind,
+    },
+    /// `warp` or `dynamic` asked of a bundle that is not a `lemi` bundle.
+    #[error("{requested} takes its cells and near lists from a `lemi` bundle; this one was baked for `{baked}`")]
+    NeedsLemiBundle {
+        requested: StrategyKind,
+        baked: StrategyKind,
+    },
     /// An option of a strategy is out of range: the strategy, the option (its field name in the
     /// strategy's options struct, so that a front end can name its own flag or key) and what is
     /// wrong, with the value (e.g. `must be 0..=4 (got 9)`).

@@ -14,7 +14,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use glam::DVec3;
 use lemi_bake::{run, BakeJob, Baker};
-use lemi_core::bundle::{BakeParams, LayerTarget, Layering, SceneRef};
+use lemi_core::bundle::{BakeParams, LayerTarget, Layering, Manifest, SceneRef};
 use lemi_core::cell::CellGrid;
 use lemi_core::clip::ClipVertex;
 use lemi_core::{Aabb, Face, Mesh, Scene, SceneBuilder, Vertex};
@@ -209,6 +209,21 @@ pub fn row_of_cells(n: usize) -> CellGrid {
     match CellGrid::tile(region, 10.0) {
         Ok(g) => g,
         Err(e) => panic!("a row of {n} cells: {e}"),
+    }
+}
+
+/// The manifest of a bundle of `scene` with `params` and `grid` and no cells yet, for tests of
+/// what is decided from the manifest alone.
+pub fn manifest_without_cells(params: BakeParams, grid: CellGrid, scene: SceneRef) -> Manifest {
+    Manifest {
+        format: lemi_core::bundle::MANIFEST_FORMAT.into(),
+        version: lemi_core::bundle::BUNDLE_VERSION,
+        generator: "test".into(),
+        scene,
+        params_hash: params.hash(),
+        params,
+        grid,
+        cells: Vec::new(),
     }
 }
 

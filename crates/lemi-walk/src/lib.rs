@@ -10,6 +10,8 @@
 //!   the reference renderer, giving a [`WalkRun`] with its typed [`WalkSummary`];
 //! - [`plot`]: the PNG plot of one walk and the SVG of several strategies' frame times;
 //! - [`controls`]: the interactive viewer's fly/walk camera and its path recording;
+//! - [`hud`]: the viewer's on-screen text and layer legend, drawn into a frame's pixels;
+//! - [`layer_tint`]: the viewer's layer colouring (every impostor pixel tinted by its layer);
 //! - [`font`]: the system font the plots and the viewer's HUD draw their text with.
 //!
 //! Nothing here panics on bad input: files, paths and options that cannot be used are
@@ -18,6 +20,8 @@
 pub mod controls;
 pub mod error;
 pub mod font;
+pub mod hud;
+pub mod layer_tint;
 pub mod path;
 pub mod plot;
 pub mod record;

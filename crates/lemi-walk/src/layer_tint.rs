@@ -5,9 +5,9 @@
 //! finds that plane with the attribution of the parallax-error certificate
 //! ([`LayerDepths::texel_of`], `lemi_core::parallax_error`), specialised for speed: a point on a
 //! layer of face `f` lies in `f`'s 90° pyramid, so only the face of the point's dominant axis is
-//! tried, and its layer distances are searched by bisection (a test checks both agree). The layer distances come from the bake's placement of the cell
-//! ([`lemi_core::layering::place_cell_in`], pure math on the manifest's parameters), so nothing is read from
-//! the cell file. Pixels on no layer plane (near geometry) are shown in grey, the background is
+//! tried, and its layer distances are searched by bisection (a test checks both agree). The layer
+//! distances come from the bake's placement of the cell ([`lemi_core::layering::place_cell_in`],
+//! pure math on the manifest's parameters), so nothing is read from the cell file. Pixels on no layer plane (near geometry) are shown in grey, the background is
 //! left as it is.
 
 use glam::DVec3;
@@ -66,7 +66,7 @@ impl CellLayers {
         params: &BakeParams,
         cell: &ViewCell,
         scene_bounds: &lemi_core::Aabb,
-    ) -> anyhow::Result<CellLayers> {
+    ) -> Result<CellLayers, lemi_core::layering::LayeringError> {
         let placements = lemi_core::layering::place_cell_in(params, cell, scene_bounds)?;
         let distances: Vec<Vec<f64>> = placements
             .iter()

@@ -1,15 +1,15 @@
 //! The viewer's on-screen text: lines drawn into the frame's RGBA before it is presented, over a
 //! translucent box in the top-left corner, plus a row of colour swatches (the layer legend).
-//! Glyphs are rasterized with `ab_glyph` from the font [`lemi_walk::font::find_font`] finds for
-//! the HUD (DejaVu Sans Mono and other common ones; `LEMI_HUD_FONT` names another file) and cached
-//! per character. Without a font the HUD
-//! has no text and the window title carries the numbers.
+//! Glyphs are rasterized with `ab_glyph` from the font [`crate::font::find_font`] finds for the
+//! HUD (DejaVu Sans Mono and other common ones; `LEMI_HUD_FONT` names another file) and cached
+//! per character. Without a font the HUD has no text (the viewer's window title carries the
+//! numbers).
 
 use std::collections::HashMap;
 use std::path::Path;
 
+use crate::font::{find_font, FontUse, LoadedFont};
 use ab_glyph::{Font, PxScale, ScaleFont};
-use lemi_walk::font::{find_font, FontUse, LoadedFont};
 
 /// One rasterized glyph: coverage `w × h` at offset `(dx, dy)` from the pen position on the
 /// baseline, and the advance.
@@ -50,6 +50,12 @@ pub struct Hud {
     font: Option<LoadedFont>,
     px: f32,
     glyphs: HashMap<char, Glyph>,
+}
+
+impl Default for Hud {
+    fn default() -> Hud {
+        Hud::new()
+    }
 }
 
 impl Hud {
