@@ -143,6 +143,7 @@ impl<'a> Baker<'a> {
             micro: MicroTextureOptions {
                 cell_size: params.micro_grid,
                 threshold: params.micro_threshold,
+                ..Default::default()
             },
             ..Default::default()
         };

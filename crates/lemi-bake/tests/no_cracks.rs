@@ -422,6 +422,9 @@ struct CopyOptions {
     /// covers (`lemi_core::compress::close_near_seam`, as the baker does), closing the seam
     /// between the near geometry and the innermost layer.
     near_gap_fill: bool,
+    /// Merge micro-textures sharing a whole edge (`MicroTextureOptions::merge`, as the baker
+    /// does).
+    merge: bool,
 }
 
 /// The bake pipeline of [`Baker::bake`] rebuilt from public parts (placement, classification,
@@ -430,6 +433,7 @@ fn bake_copy(gpu: &Gpu, scene: &Scene, params: &BakeParams, coverage: Coverage) 
     let options = CopyOptions {
         coverage,
         near_gap_fill: true,
+        merge: true,
     };
     bake_copy_stages(gpu, scene, params, options).0
 }
@@ -564,6 +568,7 @@ fn bake_copy_stages(
         micro: MicroTextureOptions {
             cell_size: params.micro_grid,
             threshold: params.micro_threshold,
+            merge: copy.merge,
         },
         ..Default::default()
     };
@@ -1096,6 +1101,84 @@ fn closed_shell_shows_no_crack_on_all_six_faces() {
     });
 }
 
+/// Merging micro-textures that share a whole edge draws the same texels with fewer quads. Pixels
+/// change only along the merged seams: where two quads met, their grown rims
+/// (`QUAD_GROWTH_TEXELS`) overlapped at equal depth and the quad drawn first showed its edge
+/// texel a fraction of a texel into its neighbour; the merged quad shows the texel that lies
+/// there. So every pixel that changes shows a colour the unmerged frame shows within a texel's
+/// footprint (here at most 2 pixels), and they are few.
+#[test]
+fn merged_micro_textures_change_only_seam_pixels() {
+    let Some(gpu) = gpu() else { return };
+    let scene = boxes_scene();
+    let params = params(&HORIZONTAL);
+    let copy = |merge| CopyOptions {
+        coverage: Coverage::Conservative,
+        near_gap_fill: true,
+        merge,
+    };
+    let (paper, _) = bake_copy_stages(&gpu, &scene, &params, copy(false));
+    let (merged, _) = bake_copy_stages(&gpu, &scene, &params, copy(true));
+    assert!(
+        (merged.quads.len() as f64) < 0.9 * paper.quads.len() as f64,
+        "{} merged quads of {}",
+        merged.quads.len(),
+        paper.quads.len()
+    );
+    let materials =
+        Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("materials"));
+    let upload = |b: &Baked| {
+        ImpostorCell::upload(
+            &gpu,
+            materials.clone(),
+            &scene,
+            &b.near,
+            &b.quads,
+            &b.macros,
+        )
+        .expect("upload")
+    };
+    let (paper_cell, merged_cell) = (upload(&paper), upload(&merged));
+    let impostors = ImpostorRenderer::new(&gpu).expect("impostor renderer");
+    let options = RenderOptions {
+        clear: CLEAR,
+        ..Default::default()
+    };
+    let (mut changed, mut total) = (0usize, 0usize);
+    for (eye_name, eye) in eyes(&cell()) {
+        for (dir_name, dir) in horizontal_dirs() {
+            let v = view(eye, dir);
+            let a = impostors.render(&paper_cell, &v, &options).expect("render");
+            let b = impostors
+                .render(&merged_cell, &v, &options)
+                .expect("render");
+            total += (RES * RES) as usize;
+            for y in 0..RES {
+                for x in 0..RES {
+                    let got = b.pixel(x, y);
+                    if a.pixel(x, y) == got {
+                        continue;
+                    }
+                    changed += 1;
+                    let near = (y.saturating_sub(2)..(y + 3).min(RES)).any(|j| {
+                        (x.saturating_sub(2)..(x + 3).min(RES)).any(|i| a.pixel(i, j) == got)
+                    });
+                    assert!(
+                        near,
+                        "eye {eye_name} {dir_name}: pixel ({x}, {y}) shows {got:?}, which the \
+                         unmerged frame shows nowhere within 2 pixels"
+                    );
+                }
+            }
+        }
+    }
+    eprintln!("{changed} of {total} pixels changed by merging");
+    assert!(
+        changed as f64 <= 2e-3 * total as f64,
+        "{changed} of {total} pixels changed by merging"
+    );
+}
+
 #[test]
 fn the_crack_metric_has_teeth() {
     let Some(gpu) = gpu() else { return };
@@ -1271,6 +1354,7 @@ fn explain_cracks() {
             Coverage::Conservative
         },
         near_gap_fill: var("NONEARFILL").is_none(),
+        merge: var("NOMERGE").is_none(),
     };
     let (mut baked, raw) = bake_copy_stages(&gpu, &scene, &params, copy);
     if let Some(eps) = var("EXPAND").and_then(|v| v.parse::<f32>().ok()) {

@@ -4,7 +4,7 @@
 use glam::DVec3;
 use lemi_core::compress::{
     analyze_micro_textures, extract_micro_textures, fill_gaps, quad_corners, remove_hidden_texels,
-    CompressError, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect,
+    CompressError, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect, TRANSPARENT,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
@@ -427,10 +427,12 @@ proptest! {
 
 // ---------------------------------------------------------------- micro-textures (sec. 5.3)
 
+/// The paper's micro-textures (no merging of neighbours).
 fn opts(cell_size: u32, threshold: f64) -> MicroTextureOptions {
     MicroTextureOptions {
         cell_size,
         threshold,
+        merge: false,
     }
 }
 
@@ -527,6 +529,7 @@ proptest! {
         threshold in 0.0f64..=1.0,
         density in 0u64..8,
         blobs in 0u32..4,
+        merge in any::<bool>(),
         seed in any::<u64>(),
     ) {
         let mut s = seed | 1;
@@ -544,9 +547,18 @@ proptest! {
                 }
             }}
         }
-        let (m, stats) = extract_micro_textures(&img, Face::PosY, 0, 1.0, &opts(cell, threshold)).unwrap();
+        let o = MicroTextureOptions { merge, ..opts(cell, threshold) };
+        let (m, stats) = extract_micro_textures(&img, Face::PosY, 0, 1.0, &o).unwrap();
         let checked = analyze_micro_textures(&img, &m).unwrap();
         prop_assert_eq!(checked, stats);
+        if merge {
+            // merging only joins rectangles that tile their union: fewer micro-textures, the
+            // same texels
+            let (paper, paper_stats) =
+                extract_micro_textures(&img, Face::PosY, 0, 1.0, &opts(cell, threshold)).unwrap();
+            prop_assert!(m.len() <= paper.len());
+            prop_assert_eq!(stats.texels, paper_stats.texels);
+        }
         for micro in &m {
             let r = micro.rect;
             let one_cell = r.x0 / cell == (r.x1 - 1) / cell && r.y0 / cell == (r.y1 - 1) / cell;
@@ -555,6 +567,49 @@ proptest! {
                 "{:?} fill {} < {}", r, micro.opaque_count() as f64 / r.area() as f64, threshold);
         }
     }
+}
+
+#[test]
+fn neighbours_sharing_a_whole_edge_merge_into_one_micro_texture() {
+    // A full 8×8 cell, and the next cell holding only its first column (8 opaque texels): the
+    // growth east stops (72 / 128 < 0.6), the second micro-texture shrinks to that column, and
+    // the two tile a fully opaque 9×8 rectangle.
+    let mut img = LayerImage::new(16);
+    for y in 0..8 {
+        for x in 0..9 {
+            let i = img.index(x, y);
+            img.set_texel(i, [x as u8, y as u8, 7, 255]);
+        }
+    }
+    let (paper, _) = extract_micro_textures(&img, Face::PosX, 0, 1.0, &opts(8, 0.6)).unwrap();
+    assert_eq!(paper.len(), 2);
+    assert_eq!(paper[1].rect, rect(8, 0, 9, 8));
+    let merged_opts = MicroTextureOptions {
+        merge: true,
+        ..opts(8, 0.6)
+    };
+    let (m, stats) = extract_micro_textures(&img, Face::PosX, 0, 1.0, &merged_opts).unwrap();
+    assert_eq!(m.len(), 1);
+    assert_eq!(m[0].rect, rect(0, 0, 9, 8));
+    assert_eq!(stats.texels, 72);
+    assert_eq!(analyze_micro_textures(&img, &m).unwrap(), stats);
+    // row-major pixels of the union, row 0 first
+    for y in 0..8u32 {
+        for x in 0..9u32 {
+            let k = 4 * (y * 9 + x) as usize;
+            assert_eq!(
+                m[0].pixels[k..k + 4],
+                [x as u8, y as u8, 7, 255],
+                "({x}, {y})"
+            );
+        }
+    }
+    // one fully opaque and one partly transparent neighbour stay apart (the runtime draws the
+    // two kinds with different pipelines), as do neighbours whose union would be too sparse
+    let i = img.index(8, 3);
+    img.set_texel(i, TRANSPARENT);
+    let (m, _) = extract_micro_textures(&img, Face::PosX, 0, 1.0, &merged_opts).unwrap();
+    assert_eq!(m.len(), 2);
 }
 
 #[test]

@@ -336,6 +336,22 @@ fn main() -> Result<(), Error> {
                         }
                     }
                 }
+                // quads sharing a whole edge with another quad of their layer (mergeable
+                // without adding a transparent texel)
+                let mut edges = std::collections::HashMap::new();
+                for q in &qs {
+                    let [x0, y0, x1, y1] = q.texels;
+                    edges.insert((q.layer, 0u8, x1, y0, y1), ());
+                    edges.insert((q.layer, 1u8, y1, x0, x1), ());
+                }
+                let mergeable = (qs.iter())
+                    .filter(|q| {
+                        let [x0, y0, x1, y1] = q.texels;
+                        edges.contains_key(&(q.layer, 0u8, x0, y0, y1))
+                            || edges.contains_key(&(q.layer, 1u8, y0, x0, x1))
+                    })
+                    .count();
+                println!("  face {f:?}: {mergeable} quads share a whole edge with another one");
                 println!(
                     "  face {f:?}: {} quads covering {:.2} x the face's texels, {:.2} x in opaque \
                      texels",
@@ -348,6 +364,32 @@ fn main() -> Result<(), Error> {
         let mut cell_imp = Vec::new();
         for (dname, dir) in dirs {
             let v = view(eye, dir, &args)?;
+            if args.stats {
+                // quads with a corner in front of the eye and inside the view (an estimate of
+                // the quads the rasterizer sets up), and their mean area on screen
+                let vp = v.view_proj();
+                let (mut n, mut px) = (0usize, 0.0f64);
+                for q in &file.header.quads {
+                    let ndc: Vec<glam::DVec3> = (q.corners.iter())
+                        .map(|c| vp * DVec3::from_array(c.map(f64::from)).extend(1.0))
+                        .filter(|c| c.w > 0.0)
+                        .map(|c| c.truncate() / c.w)
+                        .collect();
+                    if ndc.len() == 4 && ndc.iter().any(|c| c.x.abs() <= 1.0 && c.y.abs() <= 1.0) {
+                        n += 1;
+                        let s = |c: &glam::DVec3| {
+                            glam::DVec2::new(c.x * args.width as f64, c.y * args.height as f64)
+                                / 2.0
+                        };
+                        let (a, b, c, d) = (s(&ndc[0]), s(&ndc[1]), s(&ndc[2]), s(&ndc[3]));
+                        px += ((c - a).perp_dot(d - b)).abs() / 2.0;
+                    }
+                }
+                println!(
+                    "  view {dname}: {n} quads in view, {:.0} px each on average",
+                    px / n.max(1) as f64
+                );
+            }
             // Warm-up (pipelines, targets) and the frames to save or check.
             let f = impostors.render(&cell, &v, &options)?;
             save_or_check(
