@@ -298,6 +298,8 @@ fn main() -> Result<(), Error> {
     ];
     let (mut imp, mut geo) = (Series::default(), Series::default());
     let (mut quads_only, mut near_only) = (Vec::new(), Vec::new());
+    // per cell with --parts: id, quads-only GPU times, far-field pixel shares of its views
+    let mut per_cell: Vec<(lemi_core::cell::CellId, Vec<f64>, Vec<f64>)> = Vec::new();
     let mut diffs = Vec::new();
     let cells = args.cells.unwrap_or(manifest.cells.len());
     for entry in manifest.cells.iter().take(cells) {
@@ -362,6 +364,7 @@ fn main() -> Result<(), Error> {
             }
         }
         let mut cell_imp = Vec::new();
+        let (mut cell_quads, mut cell_shares) = (Vec::new(), Vec::new());
         for (dname, dir) in dirs {
             let v = view(eye, dir, &args)?;
             if args.stats {
@@ -392,6 +395,13 @@ fn main() -> Result<(), Error> {
             }
             // Warm-up (pipelines, targets) and the frames to save or check.
             let f = impostors.render(&cell, &v, &options)?;
+            if let Some(near) = &near_scene {
+                // far-field pixels: drawn in the impostor frame, not by the near geometry (quads
+                // lie beyond the near field, never in front of it)
+                let n = reference.render(near, &v, &options)?;
+                let far = f.covered_count().saturating_sub(n.covered_count());
+                cell_shares.push(far as f64 / (f.width as f64 * f.height as f64));
+            }
             save_or_check(
                 &args,
                 &format!("{}_{dname}_imp.bin", entry.id),
@@ -419,6 +429,7 @@ fn main() -> Result<(), Error> {
                 if let Some(near) = &near_scene {
                     impostors.render_impostors_only(&cell, &v, &options)?;
                     quads_only.extend(impostors.last_gpu_ms());
+                    cell_quads.extend(impostors.last_gpu_ms());
                     reference.render_no_readback(near, &v, &options)?;
                     near_only.extend(reference.last_gpu_ms());
                 }
@@ -437,6 +448,9 @@ fn main() -> Result<(), Error> {
                 geo.no_readback.push(ms_since(t));
                 geo.gpu_no_readback.extend(reference.last_gpu_ms());
             }
+        }
+        if near_scene.is_some() {
+            per_cell.push((entry.id, cell_quads, cell_shares));
         }
         println!(
             "cell {:>7}: {:>6} near triangles, {:>6} quads ({}) in {:>3} draws; impostor frame \
@@ -466,6 +480,45 @@ fn main() -> Result<(), Error> {
             fmt(median(&quads_only)),
             fmt(median(&near_only))
         );
+        if let (Some(i), Some(n)) = (median(&imp.gpu_no_readback), median(&near_only)) {
+            println!(
+                "impostor frame / near geometry only (gpu time): {:.2}x",
+                i / n
+            );
+        }
+        // the far field's cost per cell against its far-field pixels, and between neighbours
+        // whose far-field pixel shares are within 10 % of each other
+        let mut worst: Option<(f64, String)> = None;
+        for (id, q, sh) in &per_cell {
+            let share = sh.iter().sum::<f64>() / sh.len().max(1) as f64;
+            println!(
+                "  cell {id}: quads {} ms (gpu median), far-field pixels {:.1} %",
+                fmt(median(q)),
+                100.0 * share
+            );
+        }
+        for (a, qa, sa) in &per_cell {
+            for (b, qb, sb) in &per_cell {
+                let d = (a.index() - b.index()).abs().element_sum();
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let (sa, sb) = (mean(sa), mean(sb));
+                if d != 1 || (sa - sb).abs() > 0.1 * sa.max(sb) {
+                    continue;
+                }
+                if let (Some(ta), Some(tb)) = (median(qa), median(qb)) {
+                    let r = ta / tb;
+                    if worst.as_ref().is_none_or(|w| r > w.0) {
+                        worst = Some((r, format!("{a} vs {b}")));
+                    }
+                }
+            }
+        }
+        if let Some((r, pair)) = worst {
+            println!(
+                "largest far-field cost ratio between neighbours of similar far-field pixels: \
+                 {r:.2}x ({pair})"
+            );
+        }
     }
     if let (Some(i), Some(g)) = (median(&imp.wall), median(&geo.wall)) {
         println!("speed-up (render, with readback): {:.2}x", g / i);
