@@ -11,8 +11,8 @@ use lemi_core::camera::Camera;
 use lemi_core::compress::MacroTexture;
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
 use lemi_gpu::{
-    Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions,
-    Renderer, UploadOptions,
+    Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorCellData, ImpostorRenderer,
+    RenderOptions, Renderer, UploadOptions,
 };
 use lemi_testkit::gpu;
 
@@ -196,6 +196,85 @@ fn quad_shows_its_texels_exactly() {
         .render_impostors_only(&cell, &camera().view(), &opts)
         .expect("render impostors only");
     assert_eq!(f, g);
+}
+
+/// A cell's macro-textures are packed at upload into atlas pages; a quad finds its texels there
+/// through its macro-texture's offset. Spread over many small pages (each at most 32 texels a
+/// side: two here) the same quads render exactly as from one page, in more draw calls (one per face, kind
+/// and page), and each page holds only what it needs.
+#[test]
+fn quads_render_the_same_from_one_atlas_page_or_many() {
+    let Some(gpu) = gpu() else { return };
+    // Four macro-textures of distinct patterns and sizes; a quad on each, at its own depth (no
+    // two quads at equal depth, so the draw order decides no pixel).
+    let sizes = [(13u32, 9u32), (32, 16), (9, 21), (16, 32)];
+    let macros: Vec<MacroTexture> = (sizes.iter().enumerate())
+        .map(|(k, &(w, h))| {
+            let mut m = filled(w, h, [0, 0, 0, 255]);
+            for y in 0..h {
+                for x in 0..w {
+                    let a = if (x + 2 * y + k as u32) % 11 == 0 {
+                        0
+                    } else {
+                        255
+                    };
+                    put(
+                        &mut m,
+                        x,
+                        y,
+                        [(40 * k as u32 + 7 * x) as u8, (9 * y) as u8, 200, a],
+                    );
+                }
+            }
+            m
+        })
+        .collect();
+    let quads: Vec<Quad> = (sizes.iter().enumerate())
+        .map(|(k, &(w, h))| {
+            let (x0, y0) = (-3.0 + 3.0 * (k % 2) as f32, -3.0 + 3.0 * (k / 2) as f32);
+            let z = -5.0 - k as f32;
+            quad(
+                k as u32,
+                k as u16,
+                [0, 0, w, h],
+                [x0, x0 + 2.9, y0, y0 + 2.9, z],
+                [0.0; 3],
+            )
+        })
+        .collect();
+    let scene = empty_scene();
+    let mats = materials(&gpu, &scene);
+    let upload = |side: u32| {
+        let data = ImpostorCellData::prepare_for(&scene, &[], &quads, macros.clone(), side)
+            .expect("prepare");
+        let mut pending = ImpostorCell::begin_upload(&gpu, mats.clone(), data).expect("begin");
+        while !pending.upload_step(&gpu, 256).expect("upload step") {}
+        pending.finish().expect("finish")
+    };
+    let (one, many) = (upload(8192), upload(32));
+    assert_eq!(one.atlas_pages(), 1);
+    assert_eq!(many.atlas_pages(), 2);
+    assert!(many.quad_draw_calls() > one.quad_draw_calls());
+    let data: u64 = macros.iter().map(|m| m.rgba.len() as u64).sum();
+    for c in [&one, &many] {
+        assert_eq!(c.texture_bytes(), data);
+        assert!(c.resident_texture_bytes() >= data);
+    }
+    // the gaps of the packing stay below the data itself
+    assert!(
+        one.resident_texture_bytes() <= 2 * data,
+        "{}",
+        one.resident_texture_bytes()
+    );
+    let r = ImpostorRenderer::new(&gpu).expect("renderer");
+    let opts = RenderOptions::default();
+    let view = camera().view();
+    let (a, b) = (
+        r.render(&one, &view, &opts).expect("render one page"),
+        r.render(&many, &view, &opts).expect("render many pages"),
+    );
+    assert!(a.covered_count() > 600, "{}", a.covered_count());
+    assert!(a == b, "the cell renders differently from many atlas pages");
 }
 
 #[test]
