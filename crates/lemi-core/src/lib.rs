@@ -13,6 +13,7 @@ pub mod clip_border;
 pub mod compress;
 pub mod container;
 pub mod face;
+pub mod frustum;
 pub mod layering;
 pub mod parallax_error;
 pub mod placement;
