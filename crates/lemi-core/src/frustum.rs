@@ -96,10 +96,17 @@ mod tests {
     use proptest::prelude::*;
 
     fn view_proj() -> DMat4 {
-        Camera::new(DVec3::new(10.0, 0.0, 0.0), -DVec3::Z, DVec3::Y, 90.0, 64, 64)
-            .expect("camera")
-            .view()
-            .view_proj()
+        Camera::new(
+            DVec3::new(10.0, 0.0, 0.0),
+            -DVec3::Z,
+            DVec3::Y,
+            90.0,
+            64,
+            64,
+        )
+        .expect("camera")
+        .view()
+        .view_proj()
     }
 
     fn b(min: [f64; 3], max: [f64; 3]) -> (DVec3, DVec3) {

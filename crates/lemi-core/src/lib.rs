@@ -12,6 +12,7 @@ pub mod clip;
 pub mod clip_border;
 pub mod compress;
 pub mod container;
+pub mod culling;
 pub mod face;
 pub mod frustum;
 pub mod layering;
