@@ -1,6 +1,8 @@
 //! `lemi walk BUNDLE (--auto | --path P)`: headless replay of a camera path through a baked region
 //! (GI 2002 sec. 3 and 6, Figs. 8-9), with streaming impostors through a far-field strategy and
-//! then with all geometry ([`lemi_walk::walk`] does both, paced in real time). Writes
+//! then with all geometry, unculled and geometry-culled (frustum culled over Morton-ordered
+//! clusters, the baseline speed-ups are quoted against; [`lemi_walk::walk`] does all three, the
+//! impostor pass paced in real time). Writes
 //! `frames.csv`, `summary.json`, `plot.png` and `path.json`.
 
 use std::path::PathBuf;
@@ -49,9 +51,15 @@ pub struct Args {
     /// With --frames-dir: write every Nth frame.
     #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..))]
     pub every: u64,
-    /// Skip the all-geometry replay.
+    /// Skip both all-geometry replays (unculled and geometry-culled).
     #[arg(long)]
     pub no_geometry: bool,
+    /// Skip the unculled all-geometry replay (keep the geometry-culled one).
+    #[arg(long)]
+    pub no_unculled: bool,
+    /// Skip the geometry-culled replay (keep the unculled one).
+    #[arg(long)]
+    pub no_culled: bool,
     /// Cell cache budget in MiB (CPU + GPU bytes of streamed cells).
     #[arg(long, default_value_t = 512)]
     pub cache_mb: u64,
@@ -148,11 +156,13 @@ pub fn run(args: Args) -> Result<()> {
         streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),
     )?;
 
+    let unculled = !args.no_geometry && !args.no_unculled;
+    let culled = !args.no_geometry && !args.no_culled;
     let n = path.frame_count();
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
-        ProgressBar::new(n * if args.no_geometry { 1 } else { 2 })
+        ProgressBar::new(n * (1 + u64::from(unculled) + u64::from(culled)))
     };
     bar.set_style(
         ProgressStyle::with_template("{elapsed:>4} [{bar:30}] {pos}/{len} frames  {msg}")
@@ -176,9 +186,12 @@ pub fn run(args: Args) -> Result<()> {
                 let cell = record.cell.as_deref().unwrap_or("-");
                 bar.set_message(format!("impostors, cell {cell}"));
             }
-            WalkEvent::Geometry { .. } => {
+            WalkEvent::Geometry { record } => {
                 bar.inc(1);
-                bar.set_message("all geometry");
+                bar.set_message(match record.mode {
+                    lemi_walk::Mode::Culled => "all geometry, culled",
+                    _ => "all geometry",
+                });
             }
         }
         Ok(())
@@ -191,7 +204,8 @@ pub fn run(args: Args) -> Result<()> {
         WalkOptions {
             size: args.size,
             fov_x_deg: fov_x,
-            geometry: !args.no_geometry,
+            geometry: unculled,
+            culled,
             observer: Some(&mut observe),
             ..WalkOptions::new(&gpu, &scene, &manifest.grid)
         },
@@ -231,20 +245,34 @@ pub fn run(args: Args) -> Result<()> {
         s.regenerations,
         s.peak_cache_bytes as f64 / 1e6
     );
-    if !args.no_geometry {
+    if culled {
         println!(
-            "geometry   median {}, p99 {}; speed-up of the median {}",
+            "culled     median {}, p99 {}, {:.0} triangles/frame; speed-up of the median {}",
+            ms(st.culled_median_ms),
+            ms(st.culled_p99_ms),
+            st.culled_mean_triangles.unwrap_or(0.0),
+            times(st.speedup_culled_median)
+        );
+    }
+    if unculled {
+        println!(
+            "unculled   median {}, p99 {}; speed-up of the median {}",
             ms(st.geometry_median_ms),
             ms(st.geometry_p99_ms),
             times(st.speedup_median)
         );
     }
-    if st.impostor_gpu_median_ms.is_some() || st.geometry_gpu_median_ms.is_some() {
+    if st.impostor_gpu_median_ms.is_some()
+        || st.geometry_gpu_median_ms.is_some()
+        || st.culled_gpu_median_ms.is_some()
+    {
         println!(
-            "gpu time   median {} ({}), {} (all geometry); speed-up {}",
+            "gpu time   median {} ({}), {} (geometry-culled), {} (unculled); speed-up {} (culled), {} (unculled)",
             ms(st.impostor_gpu_median_ms),
             kind.name(),
+            ms(st.culled_gpu_median_ms),
             ms(st.geometry_gpu_median_ms),
+            times(st.speedup_culled_gpu_median),
             times(st.speedup_gpu_median)
         );
     }

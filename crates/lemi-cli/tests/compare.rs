@@ -124,6 +124,23 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
         );
     }
     assert!(md.contains("lemi compare"), "the command is recorded");
+    // speed-ups against geometry-culled, the unculled one beside; comparison.json carries both
+    assert!(
+        md.contains("speed-up vs culled | speed-up vs unculled"),
+        "{md}"
+    );
+    let g = &v["geometry"];
+    assert!(g["median_ms"].as_f64().unwrap() > 0.0, "{g}");
+    assert!(g["culled_median_ms"].as_f64().unwrap() > 0.0, "{g}");
+    let first = &rows[0]["walk"];
+    assert!(
+        first["speedup_culled_median"].as_f64().unwrap() > 0.0,
+        "{first}"
+    );
+    assert!(
+        first["culled_mean_triangles"].as_f64().unwrap() > 0.0,
+        "{first}"
+    );
     assert!(out.join("comparison.json").is_file());
     let svg = std::fs::read_to_string(out.join("frame_times.svg")).unwrap();
     assert!(svg.contains("<svg") && svg.contains("frame time"));

@@ -27,14 +27,21 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
     let _ = writeln!(m, "# Far-field strategies compared\n");
     let _ = writeln!(m, "Made by:\n\n```\n{command}\n```\n");
     let geo_median = geometry.and_then(|g| g.median_ms);
+    let culled_median = geometry.and_then(|g| g.culled_median_ms);
     if let Some(w) = rows.iter().find_map(|r| r.walk.as_ref()) {
         let _ = writeln!(
             m,
-            "Walk: {} frames at {}×{}, adapter {}. Every strategy replays the same path; the all-geometry replay of that path: median {} ms, p99 {} ms, GPU median {} ms.\n",
+            "Walk: {} frames at {}×{}, adapter {}. Every strategy replays the same path; the all-geometry replays of that path: geometry-culled (frustum culling over Morton-ordered clusters, {} triangles per frame) median {} ms, p99 {} ms, GPU median {} ms; unculled median {} ms, p99 {} ms, GPU median {} ms.\n",
             w.stats.frames,
             w.size[0],
             w.size[1],
             w.adapter,
+            geometry
+                .and_then(|g| g.culled_mean_triangles)
+                .map_or("–".into(), |t| format!("{t:.0}")),
+            fmt_ms(culled_median),
+            fmt_ms(geometry.and_then(|g| g.culled_p99_ms)),
+            fmt_ms(geometry.and_then(|g| g.culled_gpu_median_ms)),
             fmt_ms(geo_median),
             fmt_ms(geometry.and_then(|g| g.p99_ms)),
             fmt_ms(geometry.and_then(|g| g.gpu_median_ms)),
@@ -42,17 +49,20 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
     }
     let _ = writeln!(
         m,
-        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | GPU median ms | speed-up | stalls | regenerations | far-field pixels | max px | p99 px | crack px | mean FLIP |"
+        "| strategy | bake s/cell | disk/cell | texture memory/cell | median ms | p99 ms | GPU median ms | speed-up vs culled | speed-up vs unculled | stalls | regenerations | far-field pixels | max px | p99 px | crack px | mean FLIP |"
     );
     let _ = writeln!(
         m,
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     let dash = || "–".to_string();
     for r in rows {
         let name = r.strategy.name();
         if !r.errors.is_empty() && r.walk.is_none() && r.eval.is_none() {
-            let _ = writeln!(m, "| {name} | failed: see below | | | | | | | | | | | |");
+            let _ = writeln!(
+                m,
+                "| {name} | failed: see below | | | | | | | | | | | | | | |"
+            );
             continue;
         }
         let walk = r.walk.as_ref();
@@ -73,10 +83,11 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
             _ => fmt_bytes(per_cell.map(|p| p.1)),
         };
         let median = walk.and_then(|w| w.stats.impostor_median_ms);
-        let speedup = match (median, geo_median) {
+        let speedup_over = |base: Option<f64>| match (median, base) {
             (Some(a), Some(g)) if a > 0.0 => format!("{:.1}×", g / a),
             _ => dash(),
         };
+        let (speedup_culled, speedup) = (speedup_over(culled_median), speedup_over(geo_median));
         let e = r.eval.as_ref();
         let px = |x: Option<Option<f32>>| match x {
             Some(Some(x)) => format!("{x:.2}"),
@@ -89,7 +100,7 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
         });
         let _ = writeln!(
             m,
-            "| {name} | {} | {disk} | {} | {} | {} | {} | {speedup} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {name} | {} | {disk} | {} | {} | {} | {} | {speedup_culled} | {speedup} | {} | {} | {} | {} | {} | {} | {} |",
             bake_s.unwrap_or_else(dash),
             fmt_bytes(walk.map(|w| w.texture_bytes_per_cell)),
             fmt_ms(median),
@@ -111,7 +122,10 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
          one cell; *median/p99 ms*: wall-clock frame time of the walk (readback included), \
          *GPU median ms*: the render passes alone (timestamp queries; only for strategies whose \
          frame is all GPU work), \
-         *speed-up*: all-geometry median over the strategy's median; *stalls*: frames that waited \
+         *speed-up vs culled*: the geometry-culled median (all geometry drawn as a renderer would \
+         at least draw it: frustum culled over Morton-ordered clusters, the same image) over the \
+         strategy's median, the speed-up to quote; *speed-up vs unculled*: the unculled \
+         all-geometry median over the strategy's median; *stalls*: frames that waited \
          for a cell; *regenerations*: impostors regenerated (dynamic) or far fields recorded at \
          run time (warp); *far-field pixels*: share of the evaluated pixels drawn by the far field (the rest is near \
          geometry or background), the pixels the error columns are over; *max/p99 px*: geometric error of the far-field pixels in output pixels \

@@ -120,12 +120,18 @@ pub struct Row {
     pub frames: Vec<FrameRecord>,
 }
 
-/// The all-geometry replay's frame times.
-#[derive(Clone, Debug, Serialize)]
+/// The all-geometry replays' frame times: unculled (`median_ms`, `p99_ms`, `gpu_median_ms`) and
+/// geometry-culled (`culled_*`, the baseline speed-ups are quoted against).
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct GeometryTimes {
     pub median_ms: Option<f64>,
     pub p99_ms: Option<f64>,
     pub gpu_median_ms: Option<f64>,
+    pub culled_median_ms: Option<f64>,
+    pub culled_p99_ms: Option<f64>,
+    pub culled_gpu_median_ms: Option<f64>,
+    /// Mean triangles a geometry-culled frame submitted.
+    pub culled_mean_triangles: Option<f64>,
 }
 
 /// `comparison.json`.

@@ -148,6 +148,7 @@ pub fn run<E: std::fmt::Display>(
     let mut rows = Vec::new();
     let mut path: Option<CameraPath> = None;
     let mut geometry: Vec<FrameRecord> = Vec::new();
+    let mut culled: Vec<FrameRecord> = Vec::new();
     let mut geometry_times: Option<GeometryTimes> = None;
     for &k in kinds {
         let mut row = Row {
@@ -193,8 +194,13 @@ pub fn run<E: std::fmt::Display>(
                         median_ms: s.geometry_median_ms,
                         p99_ms: s.geometry_p99_ms,
                         gpu_median_ms: s.geometry_gpu_median_ms,
+                        culled_median_ms: s.culled_median_ms,
+                        culled_p99_ms: s.culled_p99_ms,
+                        culled_gpu_median_ms: s.culled_gpu_median_ms,
+                        culled_mean_triangles: s.culled_mean_triangles,
                     });
                     geometry = run.geometry;
+                    culled = run.culled;
                 }
                 row.frames = run.impostor;
                 row.walk = Some(run.summary);
@@ -212,9 +218,12 @@ pub fn run<E: std::fmt::Display>(
     let command = &options.command;
     let markdown = render_markdown(&rows, geometry_times.as_ref(), command);
     write(&out.join("COMPARISON.md"), markdown.as_bytes())?;
-    let walks: Vec<(&str, &[FrameRecord])> = (rows.iter())
+    let mut walks: Vec<(&str, &[FrameRecord])> = (rows.iter())
         .map(|r| (r.strategy.name(), r.frames.as_slice()))
         .collect();
+    if !culled.is_empty() {
+        walks.push(("geometry-culled", culled.as_slice()));
+    }
     let plot_error =
         lemi_walk::write_frame_times_svg(&out.join("frame_times.svg"), &walks, &geometry).err();
     let all = Comparison {
@@ -285,6 +294,7 @@ fn walk(
             size: options.walk_size,
             fov_x_deg: manifest.params.output_fov_deg.unwrap_or(60.0),
             geometry,
+            culled: geometry,
             ..WalkOptions::new(gpu, scene, &manifest.grid)
         },
     )?;

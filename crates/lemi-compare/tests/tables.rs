@@ -37,14 +37,28 @@ fn the_tables_name_every_strategy_and_every_failure() {
     ];
     let geometry = GeometryTimes {
         median_ms: Some(10.0),
-        p99_ms: None,
-        gpu_median_ms: None,
+        culled_median_ms: Some(4.0),
+        culled_mean_triangles: Some(1234.0),
+        ..Default::default()
     };
     let md = render_markdown(&rows, Some(&geometry), "lemi compare builtin:city");
     assert!(md.starts_with("# Far-field strategies compared\n"), "{md}");
     assert!(md.contains("```\nlemi compare builtin:city\n```"), "{md}");
     assert!(md.contains("| lemi | – | – |"), "{md}");
     assert!(md.contains("| cubemap | failed: see below |"), "{md}");
+    // the speed-up is quoted against geometry-culled, the unculled one beside it
+    assert!(
+        md.contains("| speed-up vs culled | speed-up vs unculled |"),
+        "{md}"
+    );
+    assert!(
+        md.contains("geometry-culled (frustum culling") || !md.contains("Walk:"),
+        "{md}"
+    );
+    let columns = |l: &str| l.matches('|').count();
+    let header = md.lines().find(|l| l.starts_with("| strategy |")).unwrap();
+    let failed = md.lines().find(|l| l.starts_with("| cubemap |")).unwrap();
+    assert_eq!(columns(header), columns(failed), "{md}");
     assert!(
         md.contains("- cubemap failed: bake (cubemap): no GPU"),
         "{md}"

@@ -66,6 +66,13 @@ fn spread3(v: u64) -> u64 {
     x
 }
 
+/// The 63-bit 3D Morton (Z-order) code of a point given in the unit cube (coordinates clamped to
+/// `[0, 1]`, quantized to 21 bits each; x in the lowest bit). NaN maps to 0.
+pub fn morton_code(unit: DVec3) -> u64 {
+    let q = (unit.clamp(DVec3::ZERO, DVec3::ONE) * 2_097_151.0).as_u64vec3();
+    spread3(q.x) | spread3(q.y) << 1 | spread3(q.z) << 2
+}
+
 impl TriangleBounds {
     pub fn new(scene: &Scene) -> Self {
         use rayon::prelude::*;
@@ -90,11 +97,7 @@ impl TriangleBounds {
         let mut keyed: Vec<(u64, usize)> = verts
             .par_iter()
             .enumerate()
-            .map(|(i, v)| {
-                let c = ((v[0] + v[1] + v[2]) / 3.0 - lo) / scale;
-                let q = (c.clamp(DVec3::ZERO, DVec3::ONE) * 2_097_151.0).as_u64vec3();
-                (spread3(q.x) | spread3(q.y) << 1 | spread3(q.z) << 2, i)
-            })
+            .map(|(i, v)| (morton_code(((v[0] + v[1] + v[2]) / 3.0 - lo) / scale), i))
             .collect();
         keyed.par_sort_unstable();
         let refs: Vec<TriRef> = keyed.iter().map(|&(_, i)| refs[i]).collect();

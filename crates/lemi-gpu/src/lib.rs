@@ -4,6 +4,8 @@
 //! - [`shading`]: the one shading model (WGSL module + CPU mirror) every pipeline shares.
 //! - [`GpuScene`]: materials and chunked geometry on the GPU.
 //! - [`Renderer`]: the reference renderer, the ground truth impostors are compared with.
+//! - [`GpuCulledScene`]: the same scene in Morton-ordered clusters with bounding boxes, drawn
+//!   frustum-culled by [`Renderer::render_culled`] (the `geometry-culled` baseline).
 //! - [`ImpostorRenderer`]: the runtime view of one baked cell ([`ImpostorCell`]): near geometry
 //!   plus the layered impostor quads.
 //! - [`LayerRecorder`] and [`CellRecorder`]: the crack-free recording of a cell's layers (what the
@@ -24,6 +26,7 @@
 //! ```
 
 pub mod cell_recorder;
+pub mod culled;
 mod device;
 pub mod impostor;
 pub mod recorder;
@@ -35,6 +38,7 @@ mod targets;
 pub mod texture;
 
 pub use cell_recorder::{CellRecorder, RecordError, Recording};
+pub use culled::{CullOptions, CullStats, CulledGeometry, GpuCulledScene};
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
 pub use impostor::{
     ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, DEFAULT_PAGE_SIDE,

@@ -7,12 +7,15 @@
 //! as `R32Float`, so the depth image is linear on every backend. Readback pads rows to wgpu's
 //! 256-byte `COPY_BYTES_PER_ROW_ALIGNMENT`.
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use lemi_core::camera::View;
+use lemi_core::culling::CullList;
 
-use crate::scene::GpuScene;
+use crate::culled::{CullStats, GpuCulledScene};
+use crate::scene::{GpuChunk, GpuMaterials, GpuScene};
 use crate::shading::{vertex_layout, Lighting, ShadingGlobals, SHADING_WGSL};
 use crate::targets::Targets;
 use crate::{Gpu, GpuError};
@@ -197,6 +200,34 @@ impl Renderer {
             .and_then(|f| f.ok_or_else(|| GpuError::Readback("no frame was read back".into())))
     }
 
+    /// Renders `scene` like [`Renderer::render`] with the same pipeline and shading, drawing only
+    /// the chunks, groups and clusters whose box may be in view (the `geometry-culled` baseline,
+    /// see [`crate::culled`]); the image is the unculled one. Returns it with what was submitted.
+    pub fn render_culled(
+        &self,
+        scene: &GpuCulledScene,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<(Frame, CullStats), GpuError> {
+        let list = scene.geometry.cull(&view.view_proj());
+        let frame = self
+            .draw_culled(scene, &list, view, options, true)?
+            .ok_or_else(|| GpuError::Readback("no frame was read back".into()))?;
+        Ok((frame, CullStats::from(&list)))
+    }
+
+    /// [`Renderer::render_culled`] without the readback (see [`Renderer::render_no_readback`]).
+    pub fn render_culled_no_readback(
+        &self,
+        scene: &GpuCulledScene,
+        view: &View,
+        options: &RenderOptions,
+    ) -> Result<CullStats, GpuError> {
+        let list = scene.geometry.cull(&view.view_proj());
+        self.draw_culled(scene, &list, view, options, false)?;
+        Ok(CullStats::from(&list))
+    }
+
     /// Renders like [`Renderer::render`] and waits until the GPU has finished, without copying or
     /// reading the images back (for timing the rendering alone; [`Renderer::last_gpu_ms`] is
     /// updated too).
@@ -221,6 +252,63 @@ impl Renderer {
     fn draw(
         &self,
         scene: &GpuScene,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        for chunk in scene.geometry.chunks() {
+            if scene.materials.bind_group(chunk.material).is_none() {
+                return Err(GpuError::Invalid(format!(
+                    "geometry uses material {} but only {} materials were uploaded",
+                    chunk.material,
+                    scene.materials.len()
+                )));
+            }
+        }
+        let draws: Vec<(&GpuChunk, Range<u32>)> = scene
+            .geometry
+            .chunks()
+            .iter()
+            .map(|c| (c, 0..c.index_count))
+            .collect();
+        self.draw_ranges(&scene.materials, &draws, view, options, readback)
+    }
+
+    fn draw_culled(
+        &self,
+        scene: &GpuCulledScene,
+        list: &CullList,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        let chunks = scene.geometry.chunks();
+        let draws = list
+            .draws
+            .iter()
+            .map(|d| {
+                chunks
+                    .get(d.chunk)
+                    .filter(|c| d.indices.start <= d.indices.end && d.indices.end <= c.index_count)
+                    .map(|c| (c, d.indices.clone()))
+                    .ok_or_else(|| {
+                        GpuError::Invalid(format!(
+                            "a culled draw names indices {:?} of chunk {} of {}",
+                            d.indices,
+                            d.chunk,
+                            chunks.len()
+                        ))
+                    })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        self.draw_ranges(&scene.materials, &draws, view, options, readback)
+    }
+
+    /// Draws index ranges of chunks in order, with one pass, pipeline and shading for every path.
+    fn draw_ranges(
+        &self,
+        materials: &GpuMaterials,
+        draws: &[(&GpuChunk, Range<u32>)],
         view: &View,
         options: &RenderOptions,
         readback: bool,
@@ -250,12 +338,12 @@ impl Renderer {
         let Some(targets) = guard.as_ref() else {
             return Err(GpuError::Readback("render targets missing".into()));
         };
-        for chunk in scene.geometry.chunks() {
-            if scene.materials.bind_group(chunk.material).is_none() {
+        for (chunk, _) in draws {
+            if materials.bind_group(chunk.material).is_none() {
                 return Err(GpuError::Invalid(format!(
                     "geometry uses material {} but only {} materials were uploaded",
                     chunk.material,
-                    scene.materials.len()
+                    materials.len()
                 )));
             }
         }
@@ -272,16 +360,20 @@ impl Renderer {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
-                for chunk in scene.geometry.chunks() {
+                let mut buffers: Option<&GpuChunk> = None;
+                for (chunk, range) in draws {
                     if bound != Some(chunk.material) {
-                        if let Some(g) = scene.materials.bind_group(chunk.material) {
+                        if let Some(g) = materials.bind_group(chunk.material) {
                             pass.set_bind_group(1, g, &[]);
                         }
                         bound = Some(chunk.material);
                     }
-                    pass.set_vertex_buffer(0, chunk.vertices.slice(..));
-                    pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
-                    pass.draw_indexed(0..chunk.index_count, 0, 0..1);
+                    if !buffers.is_some_and(|b| std::ptr::eq(b, *chunk)) {
+                        pass.set_vertex_buffer(0, chunk.vertices.slice(..));
+                        pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
+                        buffers = Some(chunk);
+                    }
+                    pass.draw_indexed(range.clone(), 0, 0..1);
                 }
             }
             targets.resolve_timer(&mut encoder);

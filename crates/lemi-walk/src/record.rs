@@ -25,8 +25,13 @@ use crate::WalkError;
 pub enum Mode {
     /// Near geometry plus the current cell's impostors.
     Impostor,
-    /// All the scene's geometry (the comparison).
+    /// All the scene's geometry, unculled (the second baseline).
     Geometry,
+    /// All the scene's geometry, frustum culled over a cluster hierarchy
+    /// (`lemi_gpu::Renderer::render_culled`): what an ordinary renderer would at least do, the
+    /// baseline a speed-up is quoted against.
+    #[serde(rename = "geometry-culled")]
+    Culled,
 }
 
 impl Mode {
@@ -34,6 +39,7 @@ impl Mode {
         match self {
             Mode::Impostor => "impostor",
             Mode::Geometry => "geometry",
+            Mode::Culled => "geometry-culled",
         }
     }
 }
@@ -55,7 +61,8 @@ pub struct FrameRecord {
     /// Impostor quads drawn (impostor mode; 0 in geometry mode).
     pub impostor_quads: u64,
     /// Triangles submitted in the frame: near triangles + 2 per quad in impostor mode, every
-    /// triangle of the scene in geometry mode.
+    /// triangle of the scene in geometry mode, those of the clusters in view in geometry-culled
+    /// mode.
     pub total_triangles: u64,
     /// Id of the view cell the eye is in, if any.
     pub cell: Option<String>,
@@ -72,11 +79,11 @@ pub struct FrameRecord {
 
 impl FrameRecord {
     /// Primitives drawn: near triangles + impostor quads in impostor mode, total triangles in
-    /// geometry mode (the bottom panel of the plot).
+    /// the geometry modes (the bottom panel of the plot).
     pub fn primitives(&self) -> u64 {
         match self.mode {
             Mode::Impostor => self.near_triangles + self.impostor_quads,
-            Mode::Geometry => self.total_triangles,
+            Mode::Geometry | Mode::Culled => self.total_triangles,
         }
     }
 }
@@ -344,16 +351,54 @@ pub struct FrameStats {
     /// Everything about each mode.
     pub impostor: TimeStats,
     pub geometry: TimeStats,
+    /// Frames of the geometry-culled replay ([`Mode::Culled`]; `geometry_*` keys are the unculled
+    /// replay's).
+    #[serde(default)]
+    pub culled_frames: usize,
+    #[serde(default)]
+    pub culled_median_ms: Option<f64>,
+    #[serde(default)]
+    pub culled_p99_ms: Option<f64>,
+    #[serde(default)]
+    pub culled_gpu_median_ms: Option<f64>,
+    #[serde(default)]
+    pub culled_mean_fps: Option<f64>,
+    /// Mean triangles a geometry-culled frame submitted.
+    #[serde(default)]
+    pub culled_mean_triangles: Option<f64>,
+    /// `culled_median_ms / impostor_median_ms`: the speed-up against geometry-culled.
+    #[serde(default)]
+    pub speedup_culled_median: Option<f64>,
+    /// `culled_gpu_median_ms / impostor_gpu_median_ms`.
+    #[serde(default)]
+    pub speedup_culled_gpu_median: Option<f64>,
+    #[serde(default)]
+    pub culled: TimeStats,
+}
+
+fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
+    }
 }
 
 impl FrameStats {
+    /// The statistics of the impostor and the unculled geometry replays (no culled replay).
     pub fn of(impostor: &[FrameRecord], geometry: &[FrameRecord]) -> FrameStats {
+        FrameStats::of_all(impostor, geometry, &[])
+    }
+
+    /// The statistics of the impostor, the unculled and the geometry-culled replays.
+    pub fn of_all(
+        impostor: &[FrameRecord],
+        geometry: &[FrameRecord],
+        culled: &[FrameRecord],
+    ) -> FrameStats {
         let i = TimeStats::of(impostor);
         let g = TimeStats::of(geometry);
-        let speedup = match (g.median_ms, i.median_ms) {
-            (Some(gm), Some(im)) if im > 0.0 => Some(gm / im),
-            _ => None,
-        };
+        let c = TimeStats::of(culled);
+        let speedup = ratio(g.median_ms, i.median_ms);
         FrameStats {
             frames: impostor.len(),
             geometry_frames: geometry.len(),
@@ -368,14 +413,20 @@ impl FrameStats {
             speedup_median: speedup,
             impostor_gpu_median_ms: i.gpu_median_ms,
             geometry_gpu_median_ms: g.gpu_median_ms,
-            speedup_gpu_median: match (g.gpu_median_ms, i.gpu_median_ms) {
-                (Some(gm), Some(im)) if im > 0.0 => Some(gm / im),
-                _ => None,
-            },
+            speedup_gpu_median: ratio(g.gpu_median_ms, i.gpu_median_ms),
             impostor_mean_fps: i.mean_fps,
             geometry_mean_fps: g.mean_fps,
+            culled_frames: culled.len(),
+            culled_median_ms: c.median_ms,
+            culled_p99_ms: c.p99_ms,
+            culled_gpu_median_ms: c.gpu_median_ms,
+            culled_mean_fps: c.mean_fps,
+            culled_mean_triangles: c.mean_primitives,
+            speedup_culled_median: ratio(c.median_ms, i.median_ms),
+            speedup_culled_gpu_median: ratio(c.gpu_median_ms, i.gpu_median_ms),
             impostor: i,
             geometry: g,
+            culled: c,
         }
     }
 }
@@ -483,9 +534,62 @@ pub(crate) mod tests {
         assert_eq!(s.speedup_median, None);
         let v: serde_json::Value = serde_json::to_value(&s).unwrap();
         assert!(v["speedup_median"].is_null());
+        assert_eq!(s.culled_frames, 0);
+        assert_eq!(s.culled_median_ms, None);
+        assert!(v["speedup_culled_median"].is_null());
         let empty = FrameStats::of(&[], &[]);
         assert_eq!(empty.frames, 0);
         assert_eq!(empty.impostor_median_ms, None);
+    }
+
+    #[test]
+    fn culled_replay_has_its_own_keys_and_speed_ups() {
+        let imp: Vec<FrameRecord> = (0..10).map(|i| rec(i, Mode::Impostor, 5.0)).collect();
+        let geo: Vec<FrameRecord> = (0..10).map(|i| rec(i, Mode::Geometry, 40.0)).collect();
+        let culled: Vec<FrameRecord> = (0..10)
+            .map(|i| {
+                let mut r = rec(i, Mode::Culled, 10.0 + i as f64);
+                r.total_triangles = 1000 * (i + 1);
+                r.gpu_ms = Some(2.0);
+                r
+            })
+            .collect();
+        let s = FrameStats::of_all(&imp, &geo, &culled);
+        // the unculled keys keep their meaning
+        assert_eq!(s.geometry_median_ms, Some(40.0));
+        assert_eq!(s.speedup_median, Some(8.0));
+        assert_eq!(s.culled_frames, 10);
+        assert_eq!(s.culled_median_ms, Some(14.0));
+        assert_eq!(s.culled_p99_ms, Some(19.0));
+        assert_eq!(s.culled_gpu_median_ms, Some(2.0));
+        assert_eq!(s.culled_mean_triangles, Some(5500.0));
+        assert_eq!(s.speedup_culled_median, Some(14.0 / 5.0));
+        assert_eq!(s.speedup_culled_gpu_median, None); // no impostor GPU times
+        let v = serde_json::to_value(&s).unwrap();
+        for k in [
+            "culled_frames",
+            "culled_median_ms",
+            "culled_p99_ms",
+            "culled_gpu_median_ms",
+            "culled_mean_fps",
+            "culled_mean_triangles",
+            "speedup_culled_median",
+            "culled",
+        ] {
+            assert!(v.get(k).is_some_and(|x| !x.is_null()), "{k}");
+        }
+        // summaries written before the culled replay existed still read
+        let mut old = v.as_object().unwrap().clone();
+        old.retain(|k, _| !k.contains("culled"));
+        let back: FrameStats = serde_json::from_value(serde_json::Value::Object(old)).unwrap();
+        assert_eq!(back.culled_frames, 0);
+        assert_eq!(back.geometry_median_ms, Some(40.0));
+        // the mode's CSV name
+        let text = to_csv(&culled[..1]).unwrap();
+        assert!(
+            text.lines().nth(1).unwrap().contains(",geometry-culled,"),
+            "{text}"
+        );
     }
 
     #[test]

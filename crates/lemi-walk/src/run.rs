@@ -6,15 +6,20 @@
 //! waits, so a strategy's background loader gets exactly the time a real walk would give it. When
 //! frames take longer than the path's frame interval (software rendering at high resolution),
 //! the loader gets more time than in real time; [`WalkSummary::slower_than_real_time_frames`]
-//! counts those frames. The geometry pass renders the same poses with the reference renderer
-//! (`lemi_gpu::Renderer`) as fast as it can.
+//! counts those frames. The geometry passes render the same poses as fast as they can: all the
+//! geometry with the reference renderer (`lemi_gpu::Renderer::render`, unculled), then the
+//! `geometry-culled` baseline (`lemi_gpu::Renderer::render_culled`: the same renderer after
+//! frustum culling Morton-ordered clusters, the same image), which is what a speed-up is quoted
+//! against.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use lemi_core::cell::CellGrid;
 use lemi_core::Scene;
-use lemi_gpu::{Frame, Gpu, GpuScene, RenderOptions, Renderer, UploadOptions};
+use lemi_gpu::{
+    CullOptions, Frame, Gpu, GpuCulledScene, GpuScene, RenderOptions, Renderer, UploadOptions,
+};
 use lemi_strategy::{FrameRequest, Strategy, StrategyKind, StrategyReport};
 use serde::{Deserialize, Serialize};
 
@@ -34,7 +39,8 @@ pub enum WalkEvent<'a> {
         record: &'a FrameRecord,
         frame: &'a Frame,
     },
-    /// A frame of the all-geometry replay was drawn.
+    /// A frame of an all-geometry replay was drawn (unculled or geometry-culled: the record's
+    /// mode tells).
     Geometry { record: &'a FrameRecord },
 }
 
@@ -53,8 +59,10 @@ pub struct WalkOptions<'a> {
     pub size: (u32, u32),
     /// Horizontal field of view in degrees, in `(0, 180)`.
     pub fov_x_deg: f64,
-    /// Also replay the path drawing all geometry.
+    /// Also replay the path drawing all geometry, unculled.
     pub geometry: bool,
+    /// Also replay the path drawing all geometry frustum culled (the `geometry-culled` baseline).
+    pub culled: bool,
     /// How long the strategy may take to get the first cells ready.
     pub preload_timeout: Duration,
     /// Told of every frame (`None`: nobody listens).
@@ -62,7 +70,7 @@ pub struct WalkOptions<'a> {
 }
 
 impl<'a> WalkOptions<'a> {
-    /// Options with the defaults: 1280 × 720, 60°, with the geometry replay, 60 s to preload.
+    /// Options with the defaults: 1280 × 720, 60°, with both geometry replays, 60 s to preload.
     pub fn new(gpu: &'a Gpu, scene: &'a Scene, grid: &'a CellGrid) -> Self {
         WalkOptions {
             gpu,
@@ -71,6 +79,7 @@ impl<'a> WalkOptions<'a> {
             size: (1280, 720),
             fov_x_deg: 60.0,
             geometry: true,
+            culled: true,
             preload_timeout: Duration::from_secs(60),
             observer: None,
         }
@@ -136,19 +145,22 @@ impl WalkSummary {
 pub struct WalkRun {
     /// One record per frame of the impostor pass.
     pub impostor: Vec<FrameRecord>,
-    /// One record per frame of the geometry replay (empty without it).
+    /// One record per frame of the unculled geometry replay (empty without it).
     pub geometry: Vec<FrameRecord>,
+    /// One record per frame of the geometry-culled replay (empty without it).
+    pub culled: Vec<FrameRecord>,
     pub summary: WalkSummary,
     /// The strategy's totals at the end of the impostor pass.
     pub report: StrategyReport,
 }
 
 impl WalkRun {
-    /// Writes `frames.csv` (impostor rows, then geometry rows), `summary.json` and `plot.png`
-    /// into `dir` (which must exist).
+    /// Writes `frames.csv` (impostor rows, then geometry rows, then geometry-culled rows),
+    /// `summary.json` and `plot.png` into `dir` (which must exist).
     pub fn write_files(&self, dir: &Path) -> Result<(), WalkError> {
         let mut all = self.impostor.clone();
         all.extend(self.geometry.iter().cloned());
+        all.extend(self.culled.iter().cloned());
         write_csv(&dir.join("frames.csv"), &all)?;
         self.summary.write_json(&dir.join("summary.json"))?;
         plot::write_plot(&dir.join("plot.png"), &self.impostor, &self.geometry)
@@ -174,8 +186,9 @@ fn view_of(
 }
 
 /// Walks `path`: the impostor pass through `strategy` (real-time paced, see the module doc), then,
-/// with [`WalkOptions::geometry`], the same poses with all geometry; one [`FrameRecord`] per frame
-/// and the [`WalkSummary`].
+/// with [`WalkOptions::geometry`], the same poses with all geometry, and with
+/// [`WalkOptions::culled`] with all geometry frustum culled; one [`FrameRecord`] per frame and the
+/// [`WalkSummary`].
 pub fn walk(
     strategy: &mut dyn Strategy,
     path: &CameraPath,
@@ -220,13 +233,37 @@ pub fn walk(
         clear: CLEAR,
         ..Default::default()
     };
-    // All geometry, for the replay (resident during the impostor pass too, as it always was).
+    // All geometry, for the replays (resident during the impostor pass too, as it always was).
     let replay = if options.geometry {
-        Some((
+        Some(
             GpuScene::upload(gpu, scene, &UploadOptions::default())
                 .map_err(gpu_err("uploading the scene for the geometry replay"))?,
-            Renderer::new(gpu).map_err(gpu_err("the reference renderer"))?,
-        ))
+        )
+    } else {
+        None
+    };
+    let culled_replay = if options.culled {
+        let materials = match &replay {
+            Some(full) => full.materials.clone(),
+            None => std::sync::Arc::new(
+                lemi_gpu::GpuMaterials::upload(gpu, &scene.materials, &scene.textures).map_err(
+                    gpu_err("uploading the materials for the geometry-culled replay"),
+                )?,
+            ),
+        };
+        let geometry = lemi_gpu::CulledGeometry::upload(gpu, scene, &CullOptions::default())
+            .map_err(gpu_err(
+                "uploading the scene for the geometry-culled replay",
+            ))?;
+        Some(
+            GpuCulledScene::from_parts(materials, geometry)
+                .map_err(gpu_err("the geometry-culled scene"))?,
+        )
+    } else {
+        None
+    };
+    let renderer = if replay.is_some() || culled_replay.is_some() {
+        Some(Renderer::new(gpu).map_err(gpu_err("the reference renderer"))?)
     } else {
         None
     };
@@ -300,7 +337,7 @@ pub fn walk(
     let report = strategy.report();
 
     let mut geometry = Vec::new();
-    if let Some((full, renderer)) = &replay {
+    if let (Some(full), Some(renderer)) = (&replay, &renderer) {
         for (index, t, pose) in &frames {
             let view = view_of(*index, pose, fov_y, options.size)?;
             let t_frame = Instant::now();
@@ -326,8 +363,35 @@ pub fn walk(
             geometry.push(record);
         }
     }
+    let mut culled = Vec::new();
+    if let (Some(scene), Some(renderer)) = (&culled_replay, &renderer) {
+        for (index, t, pose) in &frames {
+            let view = view_of(*index, pose, fov_y, options.size)?;
+            let t_frame = Instant::now();
+            let (_, stats) = renderer
+                .render_culled(scene, &view, &render_options)
+                .map_err(gpu_err(&format!("rendering geometry-culled frame {index}")))?;
+            let record = FrameRecord {
+                frame: *index,
+                t: *t,
+                mode: Mode::Culled,
+                cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
+                gpu_ms: renderer.last_gpu_ms(),
+                near_triangles: 0,
+                impostor_quads: 0,
+                total_triangles: stats.triangles,
+                cell: options.grid.locate(pose.eye).map(|c| c.id().to_string()),
+                cell_switch: false,
+                stalled: false,
+                cache_bytes: 0,
+                fallback: false,
+            };
+            notify(WalkEvent::Geometry { record: &record })?;
+            culled.push(record);
+        }
+    }
     let summary = WalkSummary {
-        stats: FrameStats::of(&impostor, &geometry),
+        stats: FrameStats::of_all(&impostor, &geometry, &culled),
         slower_than_real_time_frames: slow_frames,
         size: [w, h],
         fov_x_deg: fov_x,
@@ -346,6 +410,7 @@ pub fn walk(
     Ok(WalkRun {
         impostor,
         geometry,
+        culled,
         summary,
         report,
     })
@@ -359,8 +424,9 @@ mod tests {
     fn summary() -> WalkSummary {
         let imp: Vec<FrameRecord> = (0..10).map(|i| rec(i, Mode::Impostor, 5.0)).collect();
         let geo: Vec<FrameRecord> = (0..10).map(|i| rec(i, Mode::Geometry, 20.0)).collect();
+        let culled: Vec<FrameRecord> = (0..10).map(|i| rec(i, Mode::Culled, 10.0)).collect();
         WalkSummary {
-            stats: FrameStats::of(&imp, &geo),
+            stats: FrameStats::of_all(&imp, &geo, &culled),
             slower_than_real_time_frames: 1,
             size: [64, 36],
             fov_x_deg: 60.0,
@@ -392,6 +458,10 @@ mod tests {
             "geometry_median_ms",
             "geometry_p99_ms",
             "speedup_median",
+            "culled_median_ms",
+            "culled_p99_ms",
+            "culled_mean_triangles",
+            "speedup_culled_median",
             "impostor_mean_fps",
             "geometry_mean_fps",
             "impostor",
@@ -414,6 +484,7 @@ mod tests {
         }
         assert_eq!(v["strategy"], "lemi");
         assert_eq!(v["speedup_median"], 4.0);
+        assert_eq!(v["speedup_culled_median"], 2.0);
         assert_eq!(v["size"], serde_json::json!([64, 36]));
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("summary.json");

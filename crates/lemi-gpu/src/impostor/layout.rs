@@ -225,30 +225,7 @@ impl Bounds {
     /// transform, so that a culled draw call could not have produced a single fragment: culling
     /// never changes the image.
     pub(super) fn outside(&self, view_proj: &glam::DMat4) -> bool {
-        if !(self.min.cmple(self.max).all()) {
-            return true; // empty
-        }
-        let corners = (0..8).map(|i| {
-            let pick = |bit: usize, lo: f64, hi: f64| if i & bit == 0 { lo } else { hi };
-            let p = glam::DVec3::new(
-                pick(1, self.min.x, self.max.x),
-                pick(2, self.min.y, self.max.y),
-                pick(4, self.min.z, self.max.z),
-            );
-            *view_proj * p.extend(1.0)
-        });
-        let mut out = [true; 6];
-        for c in corners {
-            // plane value ≥ −margin: possibly inside
-            let margin = 1e-4 * (c.x.abs() + c.y.abs() + c.z.abs() + c.w.abs()) + 1e-9;
-            let planes = [c.w + c.x, c.w - c.x, c.w + c.y, c.w - c.y, c.z, c.w - c.z];
-            for (o, v) in out.iter_mut().zip(planes) {
-                if v >= -margin {
-                    *o = false;
-                }
-            }
-        }
-        out.iter().any(|&o| o)
+        lemi_core::frustum::box_outside(self.min, self.max, view_proj)
     }
 }
 
