@@ -53,6 +53,14 @@ pub struct Args {
     /// Fail (exit status 2) when any view has crack pixels.
     #[arg(long)]
     pub require_no_cracks: bool,
+    /// Fail (exit status 2) when some view's silhouette distance p99 (reference against impostor
+    /// coverage outlines) exceeds this many pixels.
+    #[arg(long, value_name = "PX")]
+    pub require_silhouette_p99: Option<f64>,
+    /// Fail (exit status 2) when the impostor covers more than this share (0..1) of all evaluated
+    /// pixels where the reference shows background.
+    #[arg(long, value_name = "SHARE")]
+    pub require_false_coverage: Option<f64>,
     /// Far-field strategy to judge: the one the bundle was baked for (default), or warp or
     /// dynamic (built at run time from a `lemi` bundle's cells and near lists).
     #[arg(long)]
@@ -69,11 +77,17 @@ pub fn run(args: Args) -> Result<()> {
     for (flag, v) in [
         ("--require-max-px", args.require_max_px),
         ("--require-placement-max-px", args.require_placement_max_px),
+        ("--require-silhouette-p99", args.require_silhouette_p99),
     ] {
         if let Some(x) = v {
             if !(x.is_finite() && x >= 0.0) {
                 bail!("{flag} must be a number of pixels >= 0 (got {x})");
             }
+        }
+    }
+    if let Some(x) = args.require_false_coverage {
+        if !(0.0..=1.0).contains(&x) {
+            bail!("--require-false-coverage must be a share in [0, 1] (got {x})");
         }
     }
     if let Some(f) = args.fov {
@@ -193,6 +207,14 @@ pub fn run(args: Args) -> Result<()> {
         if let Some(split) = run.result.info.get("error split") {
             println!("split      {split}");
         }
+        println!(
+            "silhouette max {:.2} px, worst view p99 {:.2} px, mean {:.3} px; false coverage {} pixels ({:.3} %)",
+            s.silhouette_max_px,
+            s.silhouette_p99_px,
+            s.silhouette_mean_px,
+            s.false_coverage_pixels,
+            100.0 * s.false_coverage
+        );
         println!("report     {}", index.display());
         println!("verdict    {verdict}");
     }
@@ -218,6 +240,22 @@ pub fn run(args: Args) -> Result<()> {
             "{} crack pixels (--require-no-cracks)",
             s.crack_pixels
         ));
+    }
+    if let Some(x) = args.require_silhouette_p99 {
+        if s.silhouette_p99_px as f64 > x {
+            failed.push(format!(
+                "silhouette distance p99 {:.2} px exceeds --require-silhouette-p99 {x}",
+                s.silhouette_p99_px
+            ));
+        }
+    }
+    if let Some(x) = args.require_false_coverage {
+        if s.false_coverage > x {
+            failed.push(format!(
+                "false coverage {:.5} exceeds --require-false-coverage {x}",
+                s.false_coverage
+            ));
+        }
     }
     if !failed.is_empty() {
         eprintln!("error: certificate failed: {}", failed.join("; "));

@@ -434,12 +434,38 @@ fn eval_certificate_gates_and_bad_input() {
     let o = lemi(&args);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--require-max-px"), "{}", stderr(&o));
+    let mut args = quick.to_vec();
+    args.extend([
+        "--require-silhouette-p99",
+        "0",
+        "--require-false-coverage",
+        "0",
+    ]);
+    let o = lemi(&args);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--require-silhouette-p99"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        v["silhouette_p99_px"].is_number() && v["false_coverage_pixels"].is_number(),
+        "{v}"
+    );
     // bad input
     assert_clean_error(&lemi(&["eval", "/nonexistent/bundle"]), "manifest.json");
     assert_clean_error(&lemi(&["eval", b, "--cells", "9_0_0"]), "9_0_0");
     assert_clean_error(
         &lemi(&["eval", b, "--require-max-px", "nan"]),
         "--require-max-px",
+    );
+    assert_clean_error(
+        &lemi(&["eval", b, "--require-silhouette-p99", "inf"]),
+        "--require-silhouette-p99",
+    );
+    assert_clean_error(
+        &lemi(&["eval", b, "--require-false-coverage", "2"]),
+        "--require-false-coverage",
     );
     assert_clean_error(&lemi(&["eval", b, "--size", "0x10"]), "0x10");
     assert_clean_error(&lemi(&["eval", b, "--fov", "200"]), "--fov");

@@ -4,7 +4,7 @@
 
 use lemi_gpu::Frame;
 
-use crate::image_metrics::{self, check_pair, Coverage, CrackStats, FlipResult};
+use crate::image_metrics::{self, check_pair, Coverage, CrackStats, FlipResult, SilhouetteStats};
 use crate::report::{ErrorSummary, ViewResult};
 use crate::stats::PixelErrorStats;
 use crate::EvalError;
@@ -19,6 +19,7 @@ pub struct ViewEval {
     pub ssim: f64,
     pub coverage: Coverage,
     pub cracks: CrackStats,
+    pub silhouette: SilhouetteStats,
 }
 
 /// Computes all metrics of one viewpoint. `geometric_error_px` has one entry per pixel (row-major,
@@ -49,6 +50,7 @@ pub fn evaluate_view(
         ssim: image_metrics::ssim(reference, impostor)?,
         coverage: image_metrics::coverage(reference, impostor)?,
         cracks: image_metrics::crack_pixels(reference, impostor, far_tolerance)?,
+        silhouette: image_metrics::silhouettes(reference, impostor)?,
     })
 }
 
@@ -72,6 +74,9 @@ impl ViewEval {
             psnr: self.psnr,
             ssim: self.ssim,
             coverage: self.coverage.share,
+            silhouette: ErrorSummary::of(&self.silhouette.distances),
+            false_coverage_pixels: self.silhouette.false_coverage,
+            pixels: self.flip.width as u64 * self.flip.height as u64,
         }
     }
 }

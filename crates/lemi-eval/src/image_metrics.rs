@@ -10,7 +10,11 @@
 //!   `ssim_index.m`: luma `Y = 0.299 R + 0.587 G + 0.114 B` of the 8-bit values, an 11×11 Gaussian
 //!   window with σ = 1.5, `K1 = 0.01`, `K2 = 0.03`, `L = 255`, the SSIM map over the "valid" window
 //!   positions (no padding) and its mean (MSSIM). No down-sampling is applied;
-//! - [`coverage`] and [`crack_pixels`]: from the depth images (finite depth = geometry drawn).
+//! - [`coverage`] and [`crack_pixels`]: from the depth images (finite depth = geometry drawn);
+//! - [`silhouettes`]: how far the test's coverage silhouette lies from the reference's (exact
+//!   Euclidean distance transforms, Felzenszwalb & Huttenlocher, "Distance Transforms of Sampled
+//!   Functions", Theory of Computing 2012), and the pixels the test covers where the reference
+//!   shows background.
 //!
 //! All colour metrics ignore alpha: the RGB of a background pixel is the clear colour, which is what
 //! a viewer sees. Every function checks that both frames have the same size and consistent buffers and
@@ -57,6 +61,16 @@ pub struct CrackStats {
     pub first: Vec<(u32, u32)>,
     /// One flag per pixel, row-major: `true` where a crack is.
     pub mask: Vec<bool>,
+}
+
+/// The result of [`silhouettes`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SilhouetteStats {
+    /// Per silhouette pixel of either frame, the distance in pixels to the nearest silhouette pixel
+    /// of the other (both directions pooled; `+∞` when the other frame has no silhouette).
+    pub distances: crate::stats::PixelErrorStats,
+    /// Pixels the test covers where the reference shows background.
+    pub false_coverage: u64,
 }
 
 /// nv-flip's default pixels per degree of visual angle (67: a 0.7 m wide 4K monitor at 0.7 m).
@@ -370,6 +384,121 @@ pub fn crack_pixels(
     Ok(CrackStats { count, first, mask })
 }
 
+/// Silhouette pixels of a coverage mask: covered pixels with a 4-neighbour inside the image that
+/// is not covered (the image's own edge is not a silhouette).
+fn silhouette_mask(covered: &[bool], w: usize, h: usize) -> Vec<bool> {
+    let mut out = vec![false; covered.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if !covered[i] {
+                continue;
+            }
+            let open = (x > 0 && !covered[i - 1])
+                || (x + 1 < w && !covered[i + 1])
+                || (y > 0 && !covered[i - w])
+                || (y + 1 < h && !covered[i + w]);
+            out[i] = open;
+        }
+    }
+    out
+}
+
+/// The exact squared Euclidean distance of every pixel to the nearest set pixel of `mask`
+/// (`f64::INFINITY` everywhere if none is set): Felzenszwalb & Huttenlocher's lower envelope of
+/// parabolas, once along the rows and once along the columns.
+fn squared_distance_transform(mask: &[bool], w: usize, h: usize) -> Vec<f64> {
+    let mut f: Vec<f64> = (mask.iter())
+        .map(|&m| if m { 0.0 } else { f64::INFINITY })
+        .collect();
+    let mut line = Vec::new();
+    let mut out = Vec::new();
+    for x in 0..w {
+        line.clear();
+        line.extend((0..h).map(|y| f[y * w + x]));
+        envelope_1d(&line, &mut out);
+        for (y, &d) in out.iter().enumerate() {
+            f[y * w + x] = d;
+        }
+    }
+    for y in 0..h {
+        line.clear();
+        line.extend_from_slice(&f[y * w..(y + 1) * w]);
+        envelope_1d(&line, &mut out);
+        f[y * w..(y + 1) * w].copy_from_slice(&out);
+    }
+    f
+}
+
+/// One dimension of [`squared_distance_transform`]: `out[q] = min_p (q − p)² + f[p]`.
+fn envelope_1d(f: &[f64], out: &mut Vec<f64>) {
+    let n = f.len();
+    out.clear();
+    out.resize(n, f64::INFINITY);
+    // parabolas with finite height; `v`: their vertices, `z`: where each one starts to be lowest
+    let (mut v, mut z): (Vec<usize>, Vec<f64>) = (Vec::with_capacity(n), Vec::with_capacity(n + 1));
+    for q in (0..n).filter(|&q| f[q].is_finite()) {
+        let fq = f[q] + (q * q) as f64;
+        loop {
+            let Some(&p) = v.last() else {
+                v.push(q);
+                z.push(f64::NEG_INFINITY);
+                break;
+            };
+            let s = (fq - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+            if z.last().is_some_and(|&zl| s <= zl) {
+                v.pop();
+                z.pop();
+                continue;
+            }
+            v.push(q);
+            z.push(s);
+            break;
+        }
+    }
+    if v.is_empty() {
+        return;
+    }
+    let mut k = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while k + 1 < v.len() && z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let d = q as f64 - v[k] as f64;
+        *o = d * d + f[v[k]];
+    }
+}
+
+/// Compares the coverage silhouettes of the two frames (finite depth = covered): for every
+/// silhouette pixel of each frame, its distance in pixels to the nearest silhouette pixel of the
+/// other (pooled; an impostor whose outlines sit where the geometry's do has distances of 0), and
+/// the false-coverage pixels (the test shows something where the reference shows background).
+pub fn silhouettes(reference: &Frame, test: &Frame) -> Result<SilhouetteStats, EvalError> {
+    check_pair(reference, test)?;
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let covered = |f: &Frame| f.depth.iter().map(|d| d.is_finite()).collect::<Vec<bool>>();
+    let (rc, tc) = (covered(reference), covered(test));
+    let false_coverage = rc.iter().zip(&tc).filter(|(r, t)| !**r && **t).count() as u64;
+    let (re, te) = (silhouette_mask(&rc, w, h), silhouette_mask(&tc, w, h));
+    let (rd, td) = (
+        squared_distance_transform(&re, w, h),
+        squared_distance_transform(&te, w, h),
+    );
+    let mut values = Vec::new();
+    for i in 0..w * h {
+        if te[i] {
+            values.push(rd[i].sqrt() as f32);
+        }
+        if re[i] {
+            values.push(td[i].sqrt() as f32);
+        }
+    }
+    Ok(SilhouetteStats {
+        distances: crate::stats::PixelErrorStats::from_values(&values),
+        false_coverage,
+    })
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -449,5 +578,30 @@ pub(crate) mod tests {
             assert!((mse_from_psnr(psnr_from_mse(mse)) - mse).abs() < 1e-9 * mse);
         }
         assert_eq!(mse_from_psnr(f64::INFINITY), 0.0);
+    }
+
+    proptest::proptest! {
+        /// The distance transform is exact: equal to the brute-force nearest set pixel.
+        #[test]
+        fn distance_transform_matches_brute_force(
+            w in 1usize..20,
+            h in 1usize..15,
+            bits in proptest::collection::vec(proptest::bool::weighted(0.08), 300),
+        ) {
+            let mask: Vec<bool> = bits[..w * h].to_vec();
+            let got = squared_distance_transform(&mask, w, h);
+            for y in 0..h {
+                for x in 0..w {
+                    let want = (0..w * h)
+                        .filter(|&k| mask[k])
+                        .map(|k| {
+                            let (dx, dy) = ((k % w) as f64 - x as f64, (k / w) as f64 - y as f64);
+                            dx * dx + dy * dy
+                        })
+                        .fold(f64::INFINITY, f64::min);
+                    proptest::prop_assert_eq!(got[y * w + x], want, "({}, {})", x, y);
+                }
+            }
+        }
     }
 }

@@ -10,11 +10,16 @@ use std::path::Path;
 use glam::DVec3;
 use lemi_bake::{BakeJob, Baker};
 use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
+use lemi_core::camera::View;
 use lemi_core::cell::CellGrid;
+use lemi_core::cell::ViewCell;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
-use lemi_eval::{evaluate_bundle, EvalOptions, EvalRun, ViewpointSet};
-use lemi_gpu::Gpu;
+use lemi_eval::{
+    evaluate_bundle, evaluate_with, CellRenderer, EvalError, EvalOptions, EvalRun, RenderedView,
+    ViewpointSet,
+};
+use lemi_gpu::{Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
 use lemi_testkit::gpu;
 
 const W: u32 = 256;
@@ -24,6 +29,22 @@ const FOV: f64 = 60.0;
 /// Bakes one 10 m cell of a small city on the avenue with α = `alpha_scale` × the output view's
 /// edge pixel, and evaluates it from the centre and the corners.
 fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> EvalRun {
+    let bundle = bake(gpu, scene, dir, alpha_scale);
+    evaluate_bundle(gpu, &bundle, scene, &corner_views(), |_, _, _| {}).unwrap()
+}
+
+/// The views of the certificate tests: the cell's centre and corners at the output size.
+fn corner_views() -> EvalOptions {
+    EvalOptions {
+        set: ViewpointSet::Corners,
+        random_viewpoints: 0,
+        size: Some((W, H)),
+        ..Default::default()
+    }
+}
+
+/// Bakes the cell of [`bake_and_eval`] into `dir`.
+fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Bundle {
     let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
     let params = BakeParams {
         cell_size: 10.0,
@@ -55,14 +76,114 @@ fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Eval
     };
     let baker = Baker::new(gpu, scene, params).unwrap();
     lemi_bake::run(&job, |c| baker.bake(c, |_| {}), |_, _, _| {}).unwrap();
-    let bundle = Bundle::open(dir).unwrap();
-    let options = EvalOptions {
-        set: ViewpointSet::Corners,
-        random_viewpoints: 0,
-        size: Some((W, H)),
-        ..Default::default()
+    Bundle::open(dir).unwrap()
+}
+
+/// A bundle's impostors drawn with every quad grown outward by `grow` texels of its layer (the
+/// fetch stays clamped to the quad's rectangle, so the rim repeats the edge texels): silhouettes
+/// fattened on purpose. No geometric error is measured (NaN).
+struct Grown<'a> {
+    gpu: &'a Gpu,
+    bundle: &'a Bundle,
+    scene: &'a Scene,
+    grow: f32,
+    renderer: ImpostorRenderer,
+    cell: Option<ImpostorCell>,
+}
+
+impl CellRenderer for Grown<'_> {
+    fn begin_cell(&mut self, cell: &ViewCell) -> Result<(), EvalError> {
+        let file = self.bundle.cell(cell.id()).unwrap();
+        let macros = file.decode_macros().unwrap();
+        let mut quads = file.header.quads.clone();
+        for q in &mut quads {
+            let c = q.corners.map(glam::Vec3::from);
+            let (w, h) = (
+                (q.texels[2] - q.texels[0]) as f32,
+                (q.texels[3] - q.texels[1]) as f32,
+            );
+            let (du, dv) = ((c[1] - c[0]) / w * self.grow, (c[3] - c[0]) / h * self.grow);
+            q.corners = [
+                c[0] - du - dv,
+                c[1] + du - dv,
+                c[2] + du + dv,
+                c[3] - du + dv,
+            ]
+            .map(|p| p.to_array());
+        }
+        let materials =
+            GpuMaterials::upload(self.gpu, &self.scene.materials, &self.scene.textures).unwrap();
+        let drawn = ImpostorCell::upload(
+            self.gpu,
+            std::sync::Arc::new(materials),
+            self.scene,
+            &file.near,
+            &quads,
+            &macros,
+        )
+        .unwrap();
+        self.cell = Some(drawn);
+        Ok(())
+    }
+
+    fn render(&mut self, view: &View, _eye: DVec3) -> Result<RenderedView, EvalError> {
+        let cell = self.cell.as_ref().unwrap();
+        let frame = self
+            .renderer
+            .render(cell, view, &RenderOptions::default())
+            .unwrap();
+        let n = frame.depth.len();
+        Ok(RenderedView {
+            frame,
+            error_px: vec![f32::NAN; n],
+            gap_filled: None,
+        })
+    }
+
+    fn crack_tolerance(&self, _far: f32) -> f32 {
+        f32::INFINITY
+    }
+}
+
+/// The silhouette metric sees silhouettes fattened on purpose: the same bake drawn with every quad
+/// grown by one texel of its layer (about 1.5 output pixels here) has farther silhouettes and
+/// more falsely covered pixels than drawn as baked.
+#[test]
+fn the_silhouette_metric_sees_fattened_silhouettes() {
+    let Some(gpu) = gpu() else { return };
+    let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let bundle = bake(&gpu, &scene, tmp.path(), 1.0);
+    let run = |grow: f32| {
+        let mut r = Grown {
+            gpu: &gpu,
+            bundle: &bundle,
+            scene: &scene,
+            grow,
+            renderer: ImpostorRenderer::new(&gpu).unwrap(),
+            cell: None,
+        };
+        evaluate_with(&gpu, &bundle, &scene, &corner_views(), &mut r, |_, _, _| {})
+            .unwrap()
+            .result
+            .summary
     };
-    evaluate_bundle(gpu, &bundle, scene, &options, |_, _, _| {}).unwrap()
+    let (baked, fat) = (run(0.0), run(1.0));
+    eprintln!(
+        "silhouettes as baked: max {:.2} p99 {:.2} mean {:.3} px, {} false-coverage pixels; \
+         grown by a texel: max {:.2} p99 {:.2} mean {:.3} px, {} false-coverage pixels",
+        baked.silhouette_max_px,
+        baked.silhouette_p99_px,
+        baked.silhouette_mean_px,
+        baked.false_coverage_pixels,
+        fat.silhouette_max_px,
+        fat.silhouette_p99_px,
+        fat.silhouette_mean_px,
+        fat.false_coverage_pixels
+    );
+    assert!(fat.silhouette_mean_px > baked.silhouette_mean_px + 0.3);
+    assert!(fat.silhouette_p99_px >= baked.silhouette_p99_px);
+    assert!(fat.false_coverage_pixels as f64 > 1.5 * baked.false_coverage_pixels as f64 + 100.0);
 }
 
 #[test]

@@ -123,6 +123,81 @@ fn farther_depth_beyond_tolerance_is_a_crack_within_is_not() {
     assert_eq!(seen.borrow()[2], (2, reference.depth[2]));
 }
 
+/// A 64×48 frame covering a disc of radius `r` around `(cx, cy)` (depth 5), background elsewhere.
+fn disc(cx: f32, cy: f32, r: f32) -> Frame {
+    let (w, h) = (64u32, 48u32);
+    let mut f = Frame {
+        width: w,
+        height: h,
+        rgba: vec![0; (4 * w * h) as usize],
+        depth: vec![INF; (w * h) as usize],
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let (dx, dy) = (x as f32 + 0.5 - cx, y as f32 + 0.5 - cy);
+            if dx * dx + dy * dy <= r * r {
+                let i = (y * w + x) as usize;
+                f.depth[i] = 5.0;
+                f.rgba[4 * i..4 * i + 4].copy_from_slice(&[200, 100, 50, 255]);
+            }
+        }
+    }
+    f
+}
+
+#[test]
+fn silhouette_distances_of_known_shifts_and_growths() {
+    let reference = disc(30.0, 24.0, 12.0);
+    // identical: every distance 0, nothing falsely covered
+    let same = silhouettes(&reference, &reference).unwrap();
+    assert!(same.distances.count() > 50, "{}", same.distances.count());
+    assert_eq!(same.distances.max(), 0.0);
+    assert_eq!(same.false_coverage, 0);
+    // shifted 3 px to the right: the outlines are 3 px apart where they are widest (left and
+    // right), 0 where the shifted circles cross (top and bottom)
+    let shifted = silhouettes(&reference, &disc(33.0, 24.0, 12.0)).unwrap();
+    assert!(
+        (2.5..=3.5).contains(&shifted.distances.max()),
+        "max {}",
+        shifted.distances.max()
+    );
+    assert!(shifted.distances.mean() > 0.5 && shifted.distances.mean() < 2.5);
+    // fattened by 2 px (a silhouette a texel too fat): about 2 px all round, and the ring is
+    // covered where the reference shows background (π·(14² − 12²) ≈ 163 pixels)
+    let fat = silhouettes(&reference, &disc(30.0, 24.0, 14.0)).unwrap();
+    assert!(
+        (1.5..=2.5).contains(&fat.distances.max()),
+        "max {}",
+        fat.distances.max()
+    );
+    assert!(
+        (1.3..=2.5).contains(&fat.distances.mean()),
+        "{}",
+        fat.distances.mean()
+    );
+    assert!(
+        (140..=190).contains(&fat.false_coverage),
+        "{}",
+        fat.false_coverage
+    );
+    // thinned: no false coverage, the same distances
+    let thin = silhouettes(&reference, &disc(30.0, 24.0, 10.0)).unwrap();
+    assert_eq!(thin.false_coverage, 0);
+    assert!((1.5..=2.5).contains(&thin.distances.max()));
+    // a test frame with no outline at all (nothing drawn): infinitely far
+    let mut empty = reference.clone();
+    empty.depth.iter_mut().for_each(|d| *d = INF);
+    assert_eq!(
+        silhouettes(&reference, &empty).unwrap().distances.max(),
+        INF
+    );
+    // a frame covering everything has no silhouette either (the image edge is none)
+    let full = pattern(64, 48);
+    let s = silhouettes(&full, &full).unwrap();
+    assert_eq!(s.distances.count(), 0);
+    assert!(silhouettes(&full, &pattern(32, 48)).is_err());
+}
+
 #[test]
 fn psnr_of_constant_offset_is_closed_form() {
     let a = map_rgb(&pattern(16, 16), |_, c| c.min(200));
@@ -363,6 +438,9 @@ fn verdict_format() {
         psnr: f64::INFINITY,
         ssim: 1.0,
         coverage: 1.0,
+        silhouette: ErrorSummary::default(),
+        false_coverage_pixels: 0,
+        pixels: 1,
     };
     let b = BundleResult::new(vec![CellResult::new("c", vec![view], stats)]);
     assert_eq!(

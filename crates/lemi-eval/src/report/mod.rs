@@ -105,6 +105,16 @@ pub struct ViewResult {
     pub ssim: f64,
     /// Share of the reference's covered pixels the impostor covers ([`crate::Coverage::share`]).
     pub coverage: f64,
+    /// Distances between the reference's and the impostor's coverage silhouettes, in pixels
+    /// ([`crate::image_metrics::silhouettes`]); its `count` is the silhouette pixels of both.
+    #[serde(default)]
+    pub silhouette: ErrorSummary,
+    /// Pixels the impostor covers where the reference shows background.
+    #[serde(default)]
+    pub false_coverage_pixels: u64,
+    /// Pixels of the view (width × height).
+    #[serde(default)]
+    pub pixels: u64,
 }
 
 /// Orders views worst first: more crack pixels, then larger max error, then larger p99, then larger
@@ -155,6 +165,22 @@ pub struct Aggregate {
     pub min_ssim: f64,
     /// Pixel error histogram, 0–4 px in 0.05 px bins.
     pub histogram: Histogram,
+    /// The largest silhouette distance of any view (px).
+    #[serde(default, with = "f32_or_inf")]
+    pub silhouette_max_px: f32,
+    /// The largest per-view p99 of the silhouette distances (px): every view's silhouettes are
+    /// within it but for 1 % of their pixels.
+    #[serde(default, with = "f32_or_inf")]
+    pub silhouette_p99_px: f32,
+    /// Mean silhouette distance over the silhouette pixels of all views (px).
+    #[serde(default, with = "f64_or_inf")]
+    pub silhouette_mean_px: f64,
+    /// Pixels the impostor covers where the reference shows background, over all views.
+    #[serde(default)]
+    pub false_coverage_pixels: u64,
+    /// `false_coverage_pixels` over all evaluated pixels (0 without views).
+    #[serde(default)]
+    pub false_coverage: f64,
 }
 
 impl Aggregate {
@@ -180,9 +206,22 @@ impl Aggregate {
             ssim: 1.0,
             min_ssim: 1.0,
             histogram: stats.histogram(),
+            silhouette_max_px: 0.0,
+            silhouette_p99_px: 0.0,
+            silhouette_mean_px: 0.0,
+            false_coverage_pixels: 0,
+            false_coverage: 0.0,
         };
         let (mut flip, mut coverage, mut mse, mut ssim) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let (mut outline_sum, mut outline_count, mut pixels) = (0.0f64, 0u64, 0.0f64);
         for v in views {
+            let s = &v.silhouette;
+            a.silhouette_max_px = a.silhouette_max_px.max(s.max);
+            a.silhouette_p99_px = a.silhouette_p99_px.max(s.p99);
+            outline_sum += s.mean * s.count as f64;
+            outline_count += s.count;
+            a.false_coverage_pixels += v.false_coverage_pixels;
+            pixels += v.pixels as f64;
             a.views += 1;
             a.crack_pixels += v.crack_pixels;
             a.views_with_cracks += (v.crack_pixels > 0) as u64;
@@ -200,6 +239,12 @@ impl Aggregate {
             a.coverage = coverage / n;
             a.psnr = psnr_from_mse(mse / n);
             a.ssim = ssim / n;
+        }
+        if outline_count > 0 {
+            a.silhouette_mean_px = outline_sum / outline_count as f64;
+        }
+        if pixels > 0.0 {
+            a.false_coverage = a.false_coverage_pixels as f64 / pixels;
         }
         a
     }
@@ -519,6 +564,9 @@ mod tests {
             psnr: 30.0,
             ssim: 0.9,
             coverage: 1.0,
+            silhouette: ErrorSummary::default(),
+            false_coverage_pixels: 0,
+            pixels: 1,
         }
     }
 
