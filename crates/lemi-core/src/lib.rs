@@ -13,6 +13,7 @@ pub mod clip_border;
 pub mod compress;
 pub mod container;
 pub mod face;
+pub mod hlod;
 pub mod layering;
 pub mod parallax_error;
 pub mod placement;
