@@ -229,8 +229,8 @@ pub fn simplify_far_field(
     }
     let mut per_band: Vec<Vec<TriRef>> = vec![Vec::new(); MAX_BANDS];
     for (mi, mesh) in scene.meshes.iter().enumerate() {
-        for t in 0..mesh.triangle_count() {
-            if is_near[mi][t] {
+        for (t, &near) in is_near[mi].iter().enumerate() {
+            if near {
                 continue;
             }
             let p = mesh.triangle(t).map(|v| v.as_dvec3());
