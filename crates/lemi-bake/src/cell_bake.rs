@@ -17,16 +17,22 @@
 //!   ([`lemi_gpu::recorder::Coverage::CentreSampled`]), flags no clip-border texels, does not close
 //!   the near-field seam and skips gap filling; everything else is the same pipeline, so sizes
 //!   compare fairly;
+//! - the HLOD layering (`lemi_core::hlod`) stops after classification: the far field (every
+//!   triangle not in the near list) is simplified with meshoptimizer in distance bands and stored
+//!   in the cell's `hlod` section; nothing is recorded;
 //! - the result is a [`CellFile`]: quads with world-space corners, PNG macro-textures, near list,
 //!   statistics (GI 2002 Table 2 and more).
 
 use std::time::Instant;
 
 use lemi_core::bundle::{
-    encode_png, BakeParams, CellFile, CellHeader, CellStats, LayerInfo, MacroInfo, Quad,
+    encode_png, BakeParams, CellFile, CellHeader, CellStats, HlodHeader, LayerInfo, Layering,
+    MacroInfo, ParamsError, Quad,
 };
 use lemi_core::cell::ViewCell;
+use lemi_core::classify::TriRef;
 use lemi_core::compress::{compress_cell, CompressOptions, MicroTextureOptions};
+use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;
 use lemi_core::parallax_error::LayerDepths;
 use lemi_core::Face;
@@ -56,6 +62,8 @@ pub enum Stage {
     },
     Compress,
     Png,
+    /// Simplifying the far field (HLOD).
+    Simplify,
 }
 
 impl std::fmt::Display for Stage {
@@ -70,6 +78,7 @@ impl std::fmt::Display for Stage {
             } => write!(f, "record {face} {}/{layers}", layer + 1),
             Stage::Compress => write!(f, "compress"),
             Stage::Png => write!(f, "png"),
+            Stage::Simplify => write!(f, "simplify"),
         }
     }
 }
@@ -115,6 +124,24 @@ impl<'a> Baker<'a> {
         let t = Instant::now();
         let class = self.recorder.classify(cell, &plan);
         seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
+
+        if let Layering::Hlod {
+            error_px,
+            band_factor,
+        } = params.layering
+        {
+            return self.bake_hlod(
+                cell,
+                &plan,
+                &class.near,
+                HlodOptions {
+                    error_px,
+                    band_factor,
+                },
+                seconds,
+                &mut on_stage,
+            );
+        }
 
         let t_record = Instant::now();
         let rec = self.recorder.record_layers(
@@ -211,25 +238,7 @@ impl<'a> Baker<'a> {
             png_bytes: pngs.iter().map(|p| p.len() as u64).sum(),
             seconds,
         };
-        let layers = plan
-            .faces
-            .iter()
-            .map(|f| {
-                f.placement
-                    .layers
-                    .iter()
-                    .map(|l| LayerInfo {
-                        distance: l.distance,
-                        near_border: l.near_border,
-                        far_border: if l.far_border.is_finite() {
-                            l.far_border
-                        } else {
-                            f64::MAX
-                        },
-                    })
-                    .collect()
-            })
-            .collect();
+        let layers = layer_infos(&plan);
         Ok(CellFile {
             header: CellHeader {
                 cell: *cell,
@@ -242,9 +251,63 @@ impl<'a> Baker<'a> {
                 quads,
                 macros,
                 stats,
+                hlod: None,
             },
             near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
             pngs,
+        })
+    }
+
+    /// The HLOD cell (`lemi_core::hlod`): the near list and the far field simplified in
+    /// distance bands, no layers recorded (the header keeps the placement's layers, which fixed
+    /// the near field).
+    fn bake_hlod(
+        &self,
+        cell: &ViewCell,
+        plan: &CellPlan,
+        near: &[TriRef],
+        options: HlodOptions,
+        mut seconds: Vec<(String, f64)>,
+        on_stage: &mut impl FnMut(&Stage),
+    ) -> Result<CellFile, BakeError> {
+        let params = &self.recorder.params;
+        on_stage(&Stage::Simplify);
+        let t = Instant::now();
+        let far = simplify_far_field(
+            self.recorder.scene,
+            cell,
+            plan.near_field,
+            near,
+            params.alpha,
+            &options,
+        )
+        .map_err(ParamsError::from)?;
+        seconds.push(("simplify".into(), t.elapsed().as_secs_f64()));
+        let hlod = HlodHeader::of(&far, &options);
+        let stats = CellStats {
+            far_triangles: far.source_triangles(),
+            near_triangles: near.len() as u64,
+            submitted_triangles: far.triangles(),
+            raw_bytes: hlod.mesh_bytes(),
+            seconds,
+            ..Default::default()
+        };
+        Ok(CellFile {
+            header: CellHeader {
+                cell: *cell,
+                params_hash: params.hash(),
+                scene_fingerprint: String::new(),
+                resolution: params.resolution,
+                near_field: plan.near_field,
+                faces: params.faces.clone(),
+                layers: layer_infos(plan),
+                quads: Vec::new(),
+                macros: Vec::new(),
+                stats,
+                hlod: Some(hlod),
+            },
+            near: near.iter().map(|r| [r.mesh, r.tri]).collect(),
+            pngs: Vec::new(),
         })
     }
 
@@ -259,6 +322,28 @@ impl<'a> Baker<'a> {
     pub fn record_depths(&self, cell: &ViewCell) -> Result<LayerDepths, BakeError> {
         Ok(self.recorder.record_depths(cell)?)
     }
+}
+
+/// The placement's layers of every face as stored.
+fn layer_infos(plan: &CellPlan) -> Vec<Vec<LayerInfo>> {
+    plan.faces
+        .iter()
+        .map(|f| {
+            f.placement
+                .layers
+                .iter()
+                .map(|l| LayerInfo {
+                    distance: l.distance,
+                    near_border: l.near_border,
+                    far_border: if l.far_border.is_finite() {
+                        l.far_border
+                    } else {
+                        f64::MAX
+                    },
+                })
+                .collect()
+        })
+        .collect()
 }
 
 impl From<RecordError> for BakeError {

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use lemi_core::bundle::{
-    cell_file_name, read_cell_file, BakeParams, BundleError, CellCheck, CellEntry, CellFile,
-    CellStats, Manifest, ParamsError, SceneRef, BUNDLE_VERSION, MANIFEST_FORMAT,
+    cell_file_name, read_cell_file, version_for, BakeParams, BundleError, CellCheck, CellEntry,
+    CellFile, CellStats, Manifest, ParamsError, SceneRef, MANIFEST_FORMAT,
 };
 use lemi_core::cell::{CellGrid, CellId, Shard, ViewCell};
 use lemi_core::compress::CompressError;
@@ -216,7 +216,7 @@ pub fn run(
         None => {
             let manifest = Manifest {
                 format: MANIFEST_FORMAT.into(),
-                version: BUNDLE_VERSION,
+                version: version_for(&job.params),
                 generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
                 scene: job.scene.clone(),
                 params: job.params.clone(),
@@ -328,7 +328,7 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
     }
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),
-        version: BUNDLE_VERSION,
+        version: version_for(&first.params),
         generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
         scene: first.scene.clone(),
         params: first.params.clone(),

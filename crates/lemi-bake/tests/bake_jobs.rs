@@ -352,6 +352,7 @@ fn synthetic_cell(cell: &ViewCell, tag: u32) -> CellFile {
                 far_triangles: u64::from(tag),
                 ..Default::default()
             },
+            hlod: None,
         },
         near: vec![[0, tag], [1, 2]],
         pngs: Vec::new(),

@@ -81,8 +81,9 @@ pub struct Args {
     /// Allowed parallax angle α in degrees instead of an output view.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha_deg: Option<f64>,
-    /// Far-field strategy to bake: lemi (optimal layer placement), cubemap (one layer per face) or
-    /// equidistant (Schaufler's uniformly spaced, overlapping layers). warp and dynamic are not
+    /// Far-field strategy to bake: lemi (optimal layer placement), cubemap (one layer per face),
+    /// equidistant (Schaufler's uniformly spaced, overlapping layers) or hlod (the far field as
+    /// geometry simplified with meshoptimizer within the same α). warp and dynamic are not
     /// baked: they run from a lemi bundle (`lemi walk/eval --strategy`).
     #[arg(long, default_value = "lemi")]
     pub strategy: String,
@@ -90,6 +91,14 @@ pub struct Args {
     /// of a slab's depth on each side, in [0, 1] (default 0.1).
     #[arg(long, allow_hyphen_values = true)]
     pub overlap: Option<f64>,
+    /// With --strategy hlod: the screen-space error bound of the simplified far field, as a
+    /// multiple of the parallax angle α (default 1; `lemi_core::hlod`).
+    #[arg(long, allow_hyphen_values = true)]
+    pub hlod_error_px: Option<f64>,
+    /// With --strategy hlod: the ratio of the far to the near distance of each band the far field
+    /// is simplified in (default 2).
+    #[arg(long, allow_hyphen_values = true)]
+    pub hlod_band_factor: Option<f64>,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
     #[arg(long, default_value_t = 8)]
     pub micro_grid: u32,
@@ -113,7 +122,7 @@ const DEFAULT_WIDTH: u32 = 1280;
 /// Default `--overlap` of the equidistant strategy.
 const DEFAULT_OVERLAP: f64 = 0.1;
 /// The strategies `lemi bake` bakes, by `--strategy` name.
-const BAKED_STRATEGIES: [&str; 3] = ["lemi", "cubemap", "equidistant"];
+const BAKED_STRATEGIES: [&str; 4] = ["lemi", "cubemap", "equidistant", "hlod"];
 
 /// The layering of `--strategy NAME` (with `--overlap`), or a clear error.
 /// The flag that sets the parameter a [`ParamsError`] is about.
@@ -129,10 +138,14 @@ fn flag_of(e: &ParamsError) -> &'static str {
         ParamsError::MicroGrid { .. } => "--micro-grid",
         ParamsError::MicroThreshold(_) => "--micro-threshold",
         ParamsError::Overlap(_) => "--overlap",
+        ParamsError::Hlod(e) => match e.option() {
+            "band_factor" => "--hlod-band-factor",
+            _ => "--hlod-error-px",
+        },
     }
 }
 
-fn layering_of(name: &str, overlap: Option<f64>) -> Result<Layering> {
+fn layering_of(name: &str, overlap: Option<f64>, hlod: [Option<f64>; 2]) -> Result<Layering> {
     let name = name.trim();
     let layering = match name {
         "lemi" => Layering::Optimal,
@@ -146,6 +159,13 @@ fn layering_of(name: &str, overlap: Option<f64>) -> Result<Layering> {
                 );
             }
             Layering::Equidistant { overlap: o }
+        }
+        "hlod" => {
+            let defaults = lemi_core::hlod::HlodOptions::default();
+            Layering::Hlod {
+                error_px: hlod[0].unwrap_or(defaults.error_px),
+                band_factor: hlod[1].unwrap_or(defaults.band_factor),
+            }
         }
         "warp" | "dynamic" => bail!(
             "--strategy {name} is not baked: it runs from a `lemi` bundle (`lemi bake --strategy \
@@ -161,6 +181,11 @@ fn layering_of(name: &str, overlap: Option<f64>) -> Result<Layering> {
     if overlap.is_some() && !matches!(layering, Layering::Equidistant { .. }) {
         bail!("--overlap only applies to --strategy equidistant (got --strategy {name})");
     }
+    for (value, flag) in hlod.iter().zip(["--hlod-error-px", "--hlod-band-factor"]) {
+        if value.is_some() && !matches!(layering, Layering::Hlod { .. }) {
+            bail!("{flag} only applies to --strategy hlod (got --strategy {name})");
+        }
+    }
     Ok(layering)
 }
 
@@ -172,6 +197,13 @@ fn strategy_name(layering: &Layering) -> (&'static str, String) {
         Layering::Equidistant { overlap } => (
             "equidistant",
             format!("uniformly spaced layers, overlap {overlap}"),
+        ),
+        Layering::Hlod {
+            error_px,
+            band_factor,
+        } => (
+            "hlod",
+            format!("far field simplified within {error_px} α, bands × {band_factor}"),
         ),
     }
 }
@@ -211,7 +243,11 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
     let Some(out) = args.out.clone() else {
         bail!("-o BUNDLE is required");
     };
-    let layering = layering_of(&args.strategy, args.overlap)?;
+    let layering = layering_of(
+        &args.strategy,
+        args.overlap,
+        [args.hlod_error_px, args.hlod_band_factor],
+    )?;
     let backend = BackendChoice::parse(&args.backend).context("--backend")?;
     let faces: Vec<Face> = match args.faces {
         4 => Face::HORIZONTAL.to_vec(),

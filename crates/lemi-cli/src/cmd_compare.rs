@@ -196,6 +196,8 @@ fn bake(args: &Args, k: StrategyKind, dir: &Path, gpu: &Gpu) -> Result<BakeRow> 
         micro_threshold: 0.6,
         strategy: k.name().into(),
         overlap: (k == StrategyKind::Equidistant).then_some(args.overlap),
+        hlod_error_px: None,
+        hlod_band_factor: None,
         shard: None,
         backend: args.backend.clone(),
         json: true,

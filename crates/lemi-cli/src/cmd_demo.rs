@@ -90,6 +90,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         micro_threshold: 0.6,
         strategy: "lemi".into(),
         overlap: None,
+        hlod_error_px: None,
+        hlod_band_factor: None,
         shard: None,
         backend: args.backend.clone(),
         json: false,

@@ -133,3 +133,62 @@ fn strategies_that_are_not_baked_and_bad_overlaps_are_clear_errors() {
         "nothing is baked after an error"
     );
 }
+
+#[test]
+fn hlod_bakes_and_bad_simplification_flags_are_clear_errors() {
+    let d = tmp("cli-strategy", "hlod");
+    let ok = d.join("ok");
+    let o = bake(
+        ok.to_str().unwrap(),
+        &["--strategy", "hlod", "--hlod-error-px", "2", "--json"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["strategy"], "hlod", "{v}");
+    let p = manifest_params(&ok);
+    assert_eq!(p["layering"]["hlod"]["error_px"], 2.0, "{p}");
+    assert_eq!(p["layering"]["hlod"]["band_factor"], 2.0, "{p}");
+    let cell = std::fs::read(ok.join("cells/0_0_0.lemicell")).unwrap();
+    let file = lemi_core::bundle::CellFile::decode(&cell).unwrap();
+    let h = file.header.hlod.expect("an hlod section");
+    assert!(
+        h.triangles() > 0 && h.triangles() < h.source_triangles,
+        "{h:?}"
+    );
+    assert!(file.header.quads.is_empty());
+
+    let bad = d.join("bad");
+    let o = bad.to_str().unwrap();
+    for (extra, needles) in [
+        (
+            vec!["--hlod-error-px", "nan"],
+            vec!["--hlod-error-px", "NaN"],
+        ),
+        (
+            vec!["--hlod-error-px", "0"],
+            vec!["--hlod-error-px", "positive"],
+        ),
+        (vec!["--hlod-error-px", "-1"], vec!["--hlod-error-px", "-1"]),
+        (
+            vec!["--hlod-error-px", "1e9"],
+            vec!["--hlod-error-px", "at most"],
+        ),
+        (
+            vec!["--hlod-band-factor", "1"],
+            vec!["--hlod-band-factor", "(1, 64]"],
+        ),
+        (
+            vec!["--hlod-band-factor", "inf"],
+            vec!["--hlod-band-factor"],
+        ),
+    ] {
+        let mut args = vec!["--strategy", "hlod"];
+        args.extend(extra);
+        assert_clean_error_all(&bake(o, &args), &needles);
+    }
+    assert_clean_error_all(
+        &bake(o, &["--hlod-error-px", "2"]),
+        &["--hlod-error-px", "only applies to --strategy hlod"],
+    );
+    assert!(!bad.join("manifest.json").exists());
+}

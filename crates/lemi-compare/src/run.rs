@@ -131,9 +131,8 @@ pub fn run<E: std::fmt::Display>(
     let kinds = &options.strategies;
 
     // 1. bakes
-    let mut bake_list: Vec<StrategyKind> =
-        kinds.iter().copied().filter(|k| k.is_layered()).collect();
-    if kinds.iter().any(|k| !k.is_layered()) && !bake_list.contains(&StrategyKind::Lemi) {
+    let mut bake_list: Vec<StrategyKind> = kinds.iter().copied().filter(|k| k.is_baked()).collect();
+    if kinds.iter().any(|k| !k.is_baked()) && !bake_list.contains(&StrategyKind::Lemi) {
         bake_list.insert(0, StrategyKind::Lemi);
     }
     let mut bakes: Vec<(StrategyKind, Result<BakeRow, String>)> = Vec::new();
@@ -160,13 +159,9 @@ pub fn run<E: std::fmt::Display>(
             errors: Vec::new(),
             frames: Vec::new(),
         };
-        let baked = if k.is_layered() {
-            k
-        } else {
-            StrategyKind::Lemi
-        };
+        let baked = if k.is_baked() { k } else { StrategyKind::Lemi };
         match bakes.iter().find(|(b, _)| *b == baked) {
-            Some((_, Ok(b))) if k.is_layered() => row.bake = Some(b.clone()),
+            Some((_, Ok(b))) if k.is_baked() => row.bake = Some(b.clone()),
             Some((_, Ok(_))) | None => {}
             Some((_, Err(e))) => {
                 row.errors.push(e.clone());

@@ -115,6 +115,16 @@ pub fn decode<H: DeserializeOwned>(
     version: u32,
     data: &[u8],
 ) -> Result<(H, Vec<Blob>), ContainerError> {
+    decode_versions(magic, kind, version..=version, data).map(|(_, h, b)| (h, b))
+}
+
+/// [`decode`] accepting any version in `versions`; returns the version found too.
+pub fn decode_versions<H: DeserializeOwned>(
+    magic: &[u8; 8],
+    kind: &str,
+    versions: std::ops::RangeInclusive<u32>,
+    data: &[u8],
+) -> Result<(u32, H, Vec<Blob>), ContainerError> {
     if data.len() < 8 || &data[..8] != magic {
         if data.len() < 8 && magic.starts_with(data) {
             return Err(ContainerError::Truncated {
@@ -127,10 +137,10 @@ pub fn decode<H: DeserializeOwned>(
     }
     let mut r = Reader { data, pos: 8 };
     let found = r.u32("version")?;
-    if found != version {
+    if !versions.contains(&found) {
         return Err(ContainerError::UnsupportedVersion {
             found,
-            supported: version,
+            supported: *versions.end(),
         });
     }
     if data.len() < 12 + HASH_LEN {
@@ -174,7 +184,7 @@ pub fn decode<H: DeserializeOwned>(
             "trailing bytes after the last blob".into(),
         ));
     }
-    Ok((header, blobs))
+    Ok((found, header, blobs))
 }
 
 /// Walks the structure after the version without a checksum, to tell truncation from corruption.

@@ -237,7 +237,7 @@ pub fn plan_cell(
     };
     let optimal = optimal_placements(params, cell, target)?;
     let faces: Vec<FacePlan> = match params.layering {
-        Layering::Optimal | Layering::Single => params
+        Layering::Optimal | Layering::Single | Layering::Hlod { .. } => params
             .faces
             .iter()
             .zip(optimal)

@@ -15,6 +15,7 @@ pub mod container;
 pub mod culling;
 pub mod face;
 pub mod frustum;
+pub mod hlod;
 pub mod layering;
 pub mod parallax_error;
 pub mod placement;

@@ -41,7 +41,7 @@ impl Vertex {
 }
 
 /// An indexed triangle list drawn with one material.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Mesh {
     /// Index into [`Scene::materials`].
     pub material: u32,

@@ -50,7 +50,7 @@ pub struct Recording {
 impl Recording {
     pub fn of(layering: Layering) -> Recording {
         match layering {
-            Layering::Optimal | Layering::Single => Recording {
+            Layering::Optimal | Layering::Single | Layering::Hlod { .. } => Recording {
                 coverage: Coverage::Conservative,
                 crack_free: true,
                 gap_fill: true,

@@ -78,6 +78,7 @@ pub fn bundle_strategy(manifest: &lemi_core::bundle::Manifest) -> StrategyKind {
         Layering::Optimal => StrategyKind::Lemi,
         Layering::Single => StrategyKind::Cubemap,
         Layering::Equidistant { .. } => StrategyKind::Equidistant,
+        Layering::Hlod { .. } => StrategyKind::Hlod,
     }
 }
 

@@ -12,12 +12,14 @@
 //! | `equidistant` | the same layer count spaced uniformly in depth, overlapping depth ranges, ordinary rasterization, no gap filling | per cell (`lemi bake --strategy equidistant`) | Schaufler 1998 |
 //! | `warp` | colour + depth + camera at the cell's sample point, forward-mapped depth, hole filling, backward-mapped colour | on first use of a cell | terrain impostors report |
 //! | `dynamic` | one billboard per far object, regenerated when a validity angle exceeds a pixel | no (at run time) | Schaufler 1995, RTR sec. 10.7.1 |
+//! | `hlod` | the far field as geometry simplified with meshoptimizer in distance bands within the same α | per cell (`lemi bake --strategy hlod`) | Garland & Heckbert 1997; 3D Tiles' geometric error |
 //!
 //! The first three are *layered bundles*: they differ only in how the bake placed and recorded the
 //! layers, and are drawn by [`layered::LayeredStrategy`] (the streaming runtime). `warp` and
 //! `dynamic` use a `lemi` bundle for its grid and near lists and build their far field themselves.
 
 pub mod dynamic;
+pub mod hlod;
 pub mod layered;
 pub mod warp;
 
@@ -32,7 +34,7 @@ use lemi_gpu::{Frame, Gpu, GpuMaterials, RenderOptions};
 use serde::{Deserialize, Serialize};
 
 /// Every strategy name, in the order of the comparison tables.
-pub const STRATEGY_NAMES: [&str; 5] = ["lemi", "cubemap", "equidistant", "warp", "dynamic"];
+pub const STRATEGY_NAMES: [&str; 6] = ["lemi", "cubemap", "equidistant", "warp", "dynamic", "hlod"];
 
 /// A strategy, by name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -43,15 +45,17 @@ pub enum StrategyKind {
     Equidistant,
     Warp,
     Dynamic,
+    Hlod,
 }
 
 impl StrategyKind {
-    pub const ALL: [StrategyKind; 5] = [
+    pub const ALL: [StrategyKind; 6] = [
         StrategyKind::Lemi,
         StrategyKind::Cubemap,
         StrategyKind::Equidistant,
         StrategyKind::Warp,
         StrategyKind::Dynamic,
+        StrategyKind::Hlod,
     ];
 
     pub fn name(self) -> &'static str {
@@ -61,6 +65,7 @@ impl StrategyKind {
             StrategyKind::Equidistant => "equidistant",
             StrategyKind::Warp => "warp",
             StrategyKind::Dynamic => "dynamic",
+            StrategyKind::Hlod => "hlod",
         }
     }
 
@@ -80,9 +85,15 @@ impl StrategyKind {
         )
     }
 
+    /// Whether the strategy is drawn from a bundle baked for it (the layered strategies and
+    /// `hlod`); `warp` and `dynamic` run from a `lemi` bundle.
+    pub fn is_baked(self) -> bool {
+        self.is_layered() || self == StrategyKind::Hlod
+    }
+
     /// The strategy to run on the bundle of `manifest`: `requested` if given and the bundle can
     /// serve it, else the strategy the bundle was baked for ([`layered::bundle_strategy`]). A
-    /// layered strategy needs a bundle baked for it; `warp` and `dynamic` take their cells and
+    /// layered strategy (and `hlod`) needs a bundle baked for it; `warp` and `dynamic` take their cells and
     /// near lists from a `lemi` bundle.
     pub fn for_bundle(
         manifest: &lemi_core::bundle::Manifest,
@@ -92,10 +103,10 @@ impl StrategyKind {
         let Some(requested) = requested else {
             return Ok(baked);
         };
-        if requested.is_layered() && requested != baked {
+        if requested.is_baked() && requested != baked {
             return Err(StrategyError::NotBakedFor { requested, baked });
         }
-        if !requested.is_layered() && baked != StrategyKind::Lemi {
+        if !requested.is_baked() && baked != StrategyKind::Lemi {
             return Err(StrategyError::NeedsLemiBundle { requested, baked });
         }
         Ok(requested)
@@ -112,7 +123,7 @@ impl std::fmt::Display for StrategyKind {
 #[derive(Debug, thiserror::Error)]
 pub enum StrategyError {
     #[error(
-        "unknown strategy `{0}`: the strategies are lemi, cubemap, equidistant, warp, dynamic"
+        "unknown strategy `{0}`: the strategies are lemi, cubemap, equidistant, warp, dynamic, hlod"
     )]
     UnknownStrategy(String),
     /// A layered strategy asked of a bundle baked for another one.
@@ -272,5 +283,6 @@ pub fn open(
         }
         StrategyKind::Warp => Box::new(warp::WarpStrategy::new(ctx, Default::default())?),
         StrategyKind::Dynamic => Box::new(dynamic::DynamicStrategy::new(ctx, Default::default())?),
+        StrategyKind::Hlod => Box::new(hlod::HlodStrategy::new(ctx)?),
     })
 }

@@ -19,8 +19,21 @@ mod reader;
 pub use params::{ParamsError, MAX_LAYERS, MAX_RESOLUTION, MIN_RESOLUTION};
 pub use reader::{read_cell_file, Bundle, CellCheck, VerifiedCell};
 
-/// Version of the manifest and cell files. Readers reject any other version.
+/// Version of the manifest and cell files of a layered bundle. Readers reject versions other
+/// than this one and [`HLOD_BUNDLE_VERSION`].
 pub const BUNDLE_VERSION: u32 = 2;
+/// Version of the manifest and cell files of an HLOD bundle ([`Layering::Hlod`]): version 2 plus
+/// the cell header's `hlod` section and its `hlod.bin` blob (`docs/FORMAT.md`). Layered bundles
+/// stay version 2, byte for byte; a reader of version 2 only rejects an HLOD bundle by its version.
+pub const HLOD_BUNDLE_VERSION: u32 = 3;
+
+/// The version a bundle baked with `params` is written with.
+pub fn version_for(params: &BakeParams) -> u32 {
+    match params.layering {
+        Layering::Hlod { .. } => HLOD_BUNDLE_VERSION,
+        _ => BUNDLE_VERSION,
+    }
+}
 /// Magic bytes of a cell file.
 pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
 /// `format` field of the manifest.
@@ -52,6 +65,11 @@ pub enum Layering {
     /// overlapping by `overlap` (a fraction of a slab's depth, on each side), ordinary
     /// (centre-sampled) rasterization, no gap filling.
     Equidistant { overlap: f64 },
+    /// HLOD (the engines' baseline, `lemi_core::hlod`): no layers are recorded; the far field is
+    /// the scene's far triangles simplified with meshoptimizer in distance bands whose nearest
+    /// distances grow by `band_factor`, each within the screen-space error `error_px · alpha`.
+    /// The near field is the optimal placement's, as for `lemi`.
+    Hlod { error_px: f64, band_factor: f64 },
 }
 
 impl Layering {
@@ -227,6 +245,98 @@ pub struct CellHeader {
     pub quads: Vec<Quad>,
     pub macros: Vec<MacroInfo>,
     pub stats: CellStats,
+    /// The simplified far field of an HLOD bundle (version 3 only); its meshes are stored in the
+    /// `hlod.bin` blob.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hlod: Option<HlodHeader>,
+}
+
+/// The simplified far field of a cell (`lemi_core::hlod::HlodFarField` as stored).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HlodHeader {
+    /// The bound as a multiple of α.
+    pub error_px: f64,
+    pub band_factor: f64,
+    /// Far triangles before simplification.
+    pub source_triangles: u64,
+    pub bands: Vec<HlodBandInfo>,
+}
+
+/// One distance band as stored: its meshes follow each other in `hlod.bin`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HlodBandInfo {
+    pub near: f64,
+    /// `f64::MAX` for an unbounded band.
+    pub far: f64,
+    /// The absolute error (metres) the band was simplified with.
+    pub error_bound: f64,
+    /// The largest error meshoptimizer reported, metres.
+    pub result_error: f64,
+    pub source_triangles: u64,
+    pub meshes: Vec<HlodMeshInfo>,
+    /// The meshes (stored in `hlod.bin`, not in the JSON header).
+    #[serde(skip)]
+    pub data: Vec<crate::Mesh>,
+}
+
+/// Sizes of one stored mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HlodMeshInfo {
+    pub material: u32,
+    pub vertices: u32,
+    pub triangles: u32,
+}
+
+impl HlodHeader {
+    /// The stored form of a simplified far field.
+    pub fn of(far: &crate::hlod::HlodFarField, options: &crate::hlod::HlodOptions) -> HlodHeader {
+        HlodHeader {
+            error_px: options.error_px,
+            band_factor: options.band_factor,
+            source_triangles: far.source_triangles(),
+            bands: far
+                .bands
+                .iter()
+                .map(|b| HlodBandInfo {
+                    near: b.near,
+                    far: b.far,
+                    error_bound: b.error_bound,
+                    result_error: b.result_error,
+                    source_triangles: b.source_triangles,
+                    meshes: b
+                        .meshes
+                        .iter()
+                        .map(|m| HlodMeshInfo {
+                            material: m.material,
+                            vertices: m.vertices.len() as u32,
+                            triangles: m.triangle_count() as u32,
+                        })
+                        .collect(),
+                    data: b.meshes.clone(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Every mesh, bands near to far.
+    pub fn meshes(&self) -> impl Iterator<Item = &crate::Mesh> {
+        self.bands.iter().flat_map(|b| b.data.iter())
+    }
+
+    /// Triangles after simplification.
+    pub fn triangles(&self) -> u64 {
+        self.meshes().map(|m| m.triangle_count() as u64).sum()
+    }
+
+    /// Bytes of the meshes as drawn (vertices and 32-bit indices).
+    pub fn mesh_bytes(&self) -> u64 {
+        self.meshes()
+            .map(|m| {
+                (m.vertices.len() * std::mem::size_of::<crate::Vertex>() + m.indices.len() * 4)
+                    as u64
+            })
+            .sum()
+    }
 }
 
 /// An error reading or writing a bundle: the file (or bundle directory) and what is wrong with it.
@@ -347,11 +457,11 @@ impl Manifest {
                 format!("format is `{}`, expected `{MANIFEST_FORMAT}`", m.format),
             ));
         }
-        if m.version != BUNDLE_VERSION {
+        if m.version != version_for(&m.params) {
             return Err(BundleError::invalid(
                 path,
                 format!(
-                    "bundle version {} is not supported (this lemi reads version {BUNDLE_VERSION})",
+                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, and {HLOD_BUNDLE_VERSION} for HLOD bundles)",
                     m.version
                 ),
             ));
@@ -395,12 +505,27 @@ impl CellFile {
                 data: png.clone(),
             });
         }
-        container::encode(CELL_MAGIC, BUNDLE_VERSION, &self.header, &blobs)
+        let version = match &self.header.hlod {
+            Some(h) => {
+                blobs.push(Blob {
+                    name: "hlod.bin".into(),
+                    data: encode_hlod(h)?,
+                });
+                HLOD_BUNDLE_VERSION
+            }
+            None => BUNDLE_VERSION,
+        };
+        container::encode(CELL_MAGIC, version, &self.header, &blobs)
     }
 
     pub fn decode(bytes: &[u8]) -> Result<CellFile, ContainerError> {
-        let (mut header, blobs): (CellHeader, Vec<Blob>) =
-            container::decode(CELL_MAGIC, "cell", BUNDLE_VERSION, bytes)?;
+        let (version, mut header, blobs): (u32, CellHeader, Vec<Blob>) =
+            container::decode_versions(
+                CELL_MAGIC,
+                "cell",
+                BUNDLE_VERSION..=HLOD_BUNDLE_VERSION,
+                bytes,
+            )?;
         let mut it = blobs.into_iter();
         let near_blob = it
             .next()
@@ -421,7 +546,27 @@ impl CellFile {
             .filter(|b| b.name == "quads.bin")
             .ok_or_else(|| ContainerError::Header("missing quads.bin".into()))?;
         header.quads = decode_quads(&quads_blob.data, &header)?;
-        let pngs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
+        let mut pngs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
+        match (version, &mut header.hlod) {
+            (HLOD_BUNDLE_VERSION, Some(h)) => {
+                if pngs.len() != header.macros.len() + 1 {
+                    return Err(ContainerError::Header("missing hlod.bin".into()));
+                }
+                let data = pngs.pop().unwrap_or_default();
+                decode_hlod(&data, h)?;
+            }
+            (HLOD_BUNDLE_VERSION, None) => {
+                return Err(ContainerError::Header(
+                    "a version 3 cell without its `hlod` section".into(),
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(ContainerError::Header(format!(
+                    "an `hlod` section in a version {version} cell (HLOD cells are version {HLOD_BUNDLE_VERSION})"
+                )))
+            }
+            _ => {}
+        }
         if pngs.len() != header.macros.len() {
             return Err(ContainerError::Header(format!(
                 "{} macro-textures listed but {} stored",
@@ -580,6 +725,90 @@ fn decode_quads(data: &[u8], header: &CellHeader) -> Result<Vec<Quad>, Container
         .collect()
 }
 
+/// `hlod.bin`: per band near to far, per mesh in header order, its vertices
+/// ([`crate::Vertex`], 36 bytes little-endian: position, normal, uv as f32, colour as 4 u8) then
+/// its indices (u32 little-endian), deflated (zlib).
+fn encode_hlod(h: &HlodHeader) -> Result<Vec<u8>, ContainerError> {
+    use std::io::Write;
+    let mut raw = Vec::new();
+    for (b, band) in h.bands.iter().enumerate() {
+        if band.data.len() != band.meshes.len() {
+            return Err(ContainerError::Header(format!(
+                "hlod band {b}: {} meshes listed, {} given",
+                band.meshes.len(),
+                band.data.len()
+            )));
+        }
+        for m in &band.data {
+            raw.extend_from_slice(bytemuck::cast_slice(&m.vertices));
+            raw.extend_from_slice(bytemuck::cast_slice(&m.indices));
+        }
+    }
+    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    enc.write_all(&raw)
+        .and_then(|_| enc.finish())
+        .map_err(|e| ContainerError::Header(format!("compressing hlod.bin: {e}")))
+}
+
+/// Inverse of [`encode_hlod`], into `h`'s bands; checks sizes, indices and finite positions.
+fn decode_hlod(data: &[u8], h: &mut HlodHeader) -> Result<(), ContainerError> {
+    use std::io::Read;
+    let bad = |m: String| ContainerError::Header(format!("hlod.bin: {m}"));
+    let vsize = std::mem::size_of::<crate::Vertex>() as u64;
+    let expected: u64 = h
+        .bands
+        .iter()
+        .flat_map(|b| &b.meshes)
+        .map(|m| m.vertices as u64 * vsize + m.triangles as u64 * 12)
+        .sum();
+    let mut raw = Vec::new();
+    flate2::read::ZlibDecoder::new(data)
+        .take(expected.saturating_add(1))
+        .read_to_end(&mut raw)
+        .map_err(|e| bad(format!("not valid zlib data: {e}")))?;
+    if raw.len() as u64 != expected {
+        return Err(bad(format!(
+            "{} bytes, the header's meshes need {expected}",
+            raw.len()
+        )));
+    }
+    let mut at = 0usize;
+    for (b, band) in h.bands.iter_mut().enumerate() {
+        band.data.clear();
+        for (k, info) in band.meshes.iter().enumerate() {
+            let nv = info.vertices as usize * vsize as usize;
+            let vertices: Vec<crate::Vertex> = raw[at..at + nv]
+                .chunks_exact(vsize as usize)
+                .map(bytemuck::pod_read_unaligned)
+                .collect();
+            at += nv;
+            let ni = info.triangles as usize * 12;
+            let indices: Vec<u32> = raw[at..at + ni]
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            at += ni;
+            if indices.iter().any(|&i| i >= info.vertices) {
+                return Err(bad(format!(
+                    "band {b} mesh {k}: an index past its vertices"
+                )));
+            }
+            if vertices
+                .iter()
+                .any(|v| v.position.iter().any(|c| !c.is_finite()))
+            {
+                return Err(bad(format!("band {b} mesh {k}: a non-finite position")));
+            }
+            band.data.push(crate::Mesh {
+                material: info.material,
+                vertices,
+                indices,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Encodes an RGBA8 image as PNG (best compression: macro-textures are written once, read often).
 pub fn encode_png(rgba: &[u8], width: u32, height: u32) -> Result<Vec<u8>, ContainerError> {
     use image::ImageEncoder;
@@ -648,6 +877,7 @@ mod tests {
                     height: 64,
                 }],
                 stats: CellStats::default(),
+                hlod: None,
             },
             near: vec![[0, 1], [2, 3]],
             pngs: vec![vec![137, 80, 78, 71]],
@@ -673,6 +903,58 @@ mod tests {
         let n = bad.len();
         bad[n / 3] ^= 1;
         assert!(CellFile::decode(&bad).is_err());
+    }
+
+    #[test]
+    fn hlod_cells_are_version_3_and_round_trip() {
+        let mut c = sample_cell();
+        let v = |p: [f32; 3]| crate::Vertex::new(p, [0.0, 1.0, 0.0], [0.5, 0.5], [255; 4]);
+        let mesh = crate::Mesh {
+            material: 2,
+            vertices: vec![v([0.0; 3]), v([1.0, 0.0, 0.0]), v([0.0, 0.0, 1.0])],
+            indices: vec![0, 1, 2],
+        };
+        let far = crate::hlod::HlodFarField {
+            bands: vec![crate::hlod::HlodBand {
+                near: 10.0,
+                far: 20.0,
+                error_bound: 0.01,
+                result_error: 0.005,
+                source_triangles: 7,
+                meshes: vec![mesh.clone()],
+            }],
+        };
+        c.header.hlod = Some(HlodHeader::of(&far, &Default::default()));
+        let bytes = c.encode().unwrap();
+        assert_eq!(bytes[8..12], HLOD_BUNDLE_VERSION.to_le_bytes());
+        let back = CellFile::decode(&bytes).unwrap();
+        assert_eq!(back, c);
+        let h = back.header.hlod.unwrap();
+        assert_eq!(h.meshes().next(), Some(&mesh));
+        assert_eq!((h.triangles(), h.source_triangles), (1, 7));
+        // a layered cell stays version 2
+        assert_eq!(
+            sample_cell().encode().unwrap()[8..12],
+            BUNDLE_VERSION.to_le_bytes()
+        );
+        // an index past the vertices is a clear error
+        let mut bad = c.clone();
+        if let Some(h) = bad.header.hlod.as_mut() {
+            h.bands[0].data[0].indices[2] = 9;
+        }
+        let err = CellFile::decode(&bad.encode().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("index past its vertices"), "{err}");
+        // sizes that disagree with the blob
+        let mut bad = c.clone();
+        if let Some(h) = bad.header.hlod.as_mut() {
+            h.bands[0].data[0].indices.extend([0, 1, 2]);
+        }
+        let err = CellFile::decode(&bad.encode().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("hlod.bin"), "{err}");
     }
 
     #[test]

@@ -28,6 +28,9 @@ pub enum ParamsError {
     MicroThreshold(f64),
     #[error("the equidistant layering's overlap must be a fraction of a slab's depth in [0, 1] (got {0})")]
     Overlap(f64),
+    /// An option of the HLOD layering ([`crate::hlod::HlodError::option`] names it).
+    #[error(transparent)]
+    Hlod(#[from] crate::hlod::HlodError),
 }
 
 /// Texels per face side a bake accepts.
@@ -49,7 +52,7 @@ impl ParamsError {
             ParamsError::Layers(_) | ParamsError::NearField { .. } => "target",
             ParamsError::MicroGrid { .. } => "micro_grid",
             ParamsError::MicroThreshold(_) => "micro_threshold",
-            ParamsError::Overlap(_) => "layering",
+            ParamsError::Overlap(_) | ParamsError::Hlod(_) => "layering",
         }
     }
 }
@@ -95,6 +98,17 @@ impl BakeParams {
         }
         if !(0.0..=1.0).contains(&p.micro_threshold) {
             return Err(ParamsError::MicroThreshold(p.micro_threshold));
+        }
+        if let Layering::Hlod {
+            error_px,
+            band_factor,
+        } = p.layering
+        {
+            crate::hlod::HlodOptions {
+                error_px,
+                band_factor,
+            }
+            .validate(p.alpha)?;
         }
         if let Layering::Equidistant { overlap } = p.layering {
             if !(overlap.is_finite() && (0.0..=1.0).contains(&overlap)) {
