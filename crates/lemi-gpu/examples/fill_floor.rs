@@ -1,7 +1,8 @@
 //! The floor of a far-field frame on this adapter: the GPU time of one opaque textured pass over
 //! every pixel of the view, drawn by the impostor renderer's quad pipeline as one quad, and as the
 //! same square cut into `n × n` quads (what a bake's micro-textures make of it), without and with
-//! the alpha test; and the same with a second, hidden layer behind (what depth rejection costs).
+//! the alpha test; and the same with a second, hidden layer behind (what depth rejection costs),
+//! with three more out of view, and hidden behind a wall of near geometry.
 //!
 //! ```text
 //! cargo run --release -p lemi-gpu --example fill_floor -- [--size WxH] [--reps N]
@@ -38,7 +39,8 @@ fn main() -> Result<(), Error> {
     let Some(gpu) = lemi_testkit::gpu() else {
         return Ok(());
     };
-    // A scene of one triangle far behind the camera (the near geometry is not drawn).
+    // A scene of one triangle far behind the camera (mesh 0, the near geometry of the first
+    // cases), and a wall across the whole view 40 m ahead (mesh 1, the near geometry of the last).
     let mut b = SceneBuilder::new();
     b.add_material(Material::default());
     let v = |p: [f32; 3]| Vertex::new(p, [0.0, 0.0, 1.0], [0.0, 0.0], [255; 4]);
@@ -46,6 +48,17 @@ fn main() -> Result<(), Error> {
         material: 0,
         vertices: vec![v([0.0, 0.0, 5.0]), v([1.0, 0.0, 5.0]), v([0.0, 1.0, 5.0])],
         indices: vec![0, 1, 2],
+    });
+    let wall = |x: f32, y: f32| v([x, y, -40.0]);
+    b.add_mesh(Mesh {
+        material: 0,
+        vertices: vec![
+            wall(-60.0, -40.0),
+            wall(60.0, -40.0),
+            wall(60.0, 40.0),
+            wall(-60.0, 40.0),
+        ],
+        indices: vec![0, 1, 2, 0, 2, 3],
     });
     let scene = b.finish();
     let materials = Arc::new(GpuMaterials::upload(
@@ -156,6 +169,35 @@ fn main() -> Result<(), Error> {
         println!(
             "{label:>46}: {:>7} quads, {:.2} ms",
             cell.quad_count(),
+            ms[ms.len() / 2]
+        );
+    }
+    // The near geometry hiding the far field: a wall across the view in front of 64×64 quads,
+    // drawn as a frame of the runtime (near geometry, then quads), against the wall alone.
+    let (quads, tex) = square(50.0, 64, 0);
+    let cell = ImpostorCell::upload(
+        &gpu,
+        materials.clone(),
+        &scene,
+        &[[1, 0], [1, 1]],
+        &quads,
+        &[tex],
+    )?;
+    let wall_only = ImpostorCell::upload(&gpu, materials, &scene, &[[1, 0], [1, 1]], &[], &[])?;
+    for (label, c) in [
+        ("a wall of near geometry alone", &wall_only),
+        ("... with 64x64 quads hidden behind it", &cell),
+    ] {
+        let mut ms = Vec::with_capacity(reps);
+        for _ in 0..reps + 2 {
+            renderer.render(c, &view, &options)?;
+            ms.push(renderer.last_gpu_ms().unwrap_or(f64::NAN));
+        }
+        ms.drain(..2);
+        ms.sort_by(f64::total_cmp);
+        println!(
+            "{label:>46}: {:>7} quads, {:.2} ms",
+            c.quad_count(),
             ms[ms.len() / 2]
         );
     }
