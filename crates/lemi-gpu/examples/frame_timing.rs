@@ -5,6 +5,9 @@
 //! - `ImpostorRenderer::render` (near geometry + quads, with the readback of colour and depth),
 //! - `ImpostorRenderer::render_no_readback` (the same passes, waited for, nothing read back),
 //! - `Renderer::render` and `Renderer::render_no_readback` with the whole scene,
+//! - `Renderer::render_culled` and `render_culled_no_readback` with the whole scene frustum-culled
+//!   over its cluster hierarchy (`geometry-culled`, the baseline a speed-up is quoted against;
+//!   its frames are compared with the unculled ones, which they must equal),
 //!
 //! and prints medians of the wall-clock times and of the GPU times from timestamp queries
 //! (`last_gpu_ms`, when the adapter has them), and the mean process CPU time per frame (all
@@ -40,8 +43,8 @@ use glam::DVec3;
 use lemi_core::bundle::Bundle;
 use lemi_core::camera::{Camera, View};
 use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuGeometry, GpuScene, ImpostorCell, ImpostorRenderer,
-    RenderOptions, Renderer, UploadOptions,
+    BackendChoice, CullOptions, CulledGeometry, Frame, Gpu, GpuCulledScene, GpuGeometry, GpuScene,
+    ImpostorCell, ImpostorRenderer, RenderOptions, Renderer, UploadOptions,
 };
 
 type Error = Box<dyn std::error::Error>;
@@ -286,6 +289,17 @@ fn main() -> Result<(), Error> {
         t.elapsed().as_secs_f64()
     );
     let all = GpuScene::upload(&gpu, &scene, &UploadOptions::default())?;
+    // the same scene frustum-culled over its cluster hierarchy: the baseline a speed-up is
+    // quoted against
+    let culled = if args.no_geometry {
+        None
+    } else {
+        let geometry = CulledGeometry::upload(&gpu, &scene, &CullOptions::default())?;
+        Some(GpuCulledScene::from_parts(
+            Arc::clone(&all.materials),
+            geometry,
+        )?)
+    };
     let materials = Arc::clone(&all.materials);
     let impostors = ImpostorRenderer::new(&gpu)?;
     let reference = Renderer::new(&gpu)?;
@@ -297,6 +311,7 @@ fn main() -> Result<(), Error> {
         ("nz", -DVec3::Z),
     ];
     let (mut imp, mut geo) = (Series::default(), Series::default());
+    let (mut cul, mut culled_triangles) = (Series::default(), Vec::new());
     let (mut quads_only, mut near_only) = (Vec::new(), Vec::new());
     // per cell with --parts: id, quads-only GPU times, far-field pixel shares of its views
     let mut per_cell: Vec<(lemi_core::cell::CellId, Vec<f64>, Vec<f64>)> = Vec::new();
@@ -412,6 +427,14 @@ fn main() -> Result<(), Error> {
                 let g = reference.render(&all, &v, &options)?;
                 let name = format!("{}_{dname}_geo.bin", entry.id);
                 save_or_check(&args, &name, &g, &mut diffs);
+                if let Some(c) = &culled {
+                    // culling never changes the image
+                    let (cg, _) = reference.render_culled(c, &v, &options)?;
+                    diffs.push((
+                        format!("{name} (culled)"),
+                        differing_pixels(&g, &frame_bytes(&cg)),
+                    ));
+                }
             }
             for _ in 0..args.reps {
                 let (t, c) = (Instant::now(), cpu_ms());
@@ -447,6 +470,20 @@ fn main() -> Result<(), Error> {
                 geo.cpu_no_readback += cpu_ms() - c;
                 geo.no_readback.push(ms_since(t));
                 geo.gpu_no_readback.extend(reference.last_gpu_ms());
+                if let Some(c) = &culled {
+                    let (t, cpu) = (Instant::now(), cpu_ms());
+                    let (g, stats) = reference.render_culled(c, &v, &options)?;
+                    cul.cpu += cpu_ms() - cpu;
+                    cul.wall.push(ms_since(t));
+                    drop(g);
+                    cul.gpu.extend(reference.last_gpu_ms());
+                    culled_triangles.push(stats.triangles as f64);
+                    let (t, cpu) = (Instant::now(), cpu_ms());
+                    reference.render_culled_no_readback(c, &v, &options)?;
+                    cul.cpu_no_readback += cpu_ms() - cpu;
+                    cul.no_readback.push(ms_since(t));
+                    cul.gpu_no_readback.extend(reference.last_gpu_ms());
+                }
             }
         }
         if near_scene.is_some() {
@@ -473,6 +510,10 @@ fn main() -> Result<(), Error> {
     );
     println!("{}", imp.row("impostor"));
     println!("{}", geo.row("geometry"));
+    println!("{}", cul.row("culled"));
+    if let Some(t) = median(&culled_triangles) {
+        println!("culled geometry: median {t:.0} triangles submitted per frame");
+    }
     if args.parts {
         println!(
             "gpu time of the parts: quads only (render_impostors_only) {} ms, near geometry only \
@@ -529,6 +570,18 @@ fn main() -> Result<(), Error> {
     if let (Some(i), Some(g)) = (median(&imp.gpu), median(&geo.gpu)) {
         println!("speed-up (gpu time):              {:.2}x", g / i);
     }
+    if let (Some(i), Some(g)) = (median(&imp.wall), median(&cul.wall)) {
+        println!(
+            "speed-up over culled geometry (render, with readback): {:.2}x",
+            g / i
+        );
+    }
+    if let (Some(i), Some(g)) = (median(&imp.gpu), median(&cul.gpu)) {
+        println!(
+            "speed-up over culled geometry (gpu time):              {:.2}x",
+            g / i
+        );
+    }
     for (name, s) in [("impostor", &imp), ("geometry", &geo)] {
         if let (Some(w), Some(n), Some(gp)) = (
             median(&s.wall),
@@ -542,7 +595,7 @@ fn main() -> Result<(), Error> {
             );
         }
     }
-    if args.check.is_some() {
+    if !diffs.is_empty() {
         let bad: Vec<_> = diffs.iter().filter(|(_, n)| *n > 0).collect();
         println!(
             "\ncheck: {} frames compared, {} differ",

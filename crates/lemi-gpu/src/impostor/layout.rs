@@ -474,35 +474,20 @@ mod tests {
     }
 
     #[test]
-    fn bounds_outside_the_view_are_culled_only_when_wholly_outside() {
-        use glam::DVec3;
+    fn empty_bounds_are_outside_every_view() {
+        // the box test itself is lemi_core::frustum's (tested there); a draw call without
+        // vertices is never drawn
         let view = lemi_core::camera::Camera::new(
-            DVec3::new(10.0, 0.0, 0.0),
-            -DVec3::Z,
-            DVec3::Y,
+            glam::DVec3::ZERO,
+            -glam::DVec3::Z,
+            glam::DVec3::Y,
             90.0,
             64,
             64,
         )
         .expect("camera")
         .view();
-        let vp = view.view_proj();
-        let b = |min: [f64; 3], max: [f64; 3]| Bounds {
-            min: DVec3::from_array(min) + DVec3::new(10.0, 0.0, 0.0),
-            max: DVec3::from_array(max) + DVec3::new(10.0, 0.0, 0.0),
-        };
-        // in front, straddling the left edge, around the eye: kept
-        assert!(!b([-1.0, -1.0, -6.0], [1.0, 1.0, -5.0]).outside(&vp));
-        assert!(!b([-9.0, -1.0, -5.0], [-4.0, 1.0, -5.0]).outside(&vp));
-        assert!(!b([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]).outside(&vp));
-        // a plane seen edge-on at the frustum's side (x = −z, 45° left): kept
-        assert!(!b([-5.0, -1.0, -5.0], [-5.0, 1.0, -5.0]).outside(&vp));
-        // behind the eye, wholly left, above, right: culled
-        assert!(b([-1.0, -1.0, 2.0], [1.0, 1.0, 3.0]).outside(&vp));
-        assert!(b([-9.0, -1.0, -5.0], [-6.0, 1.0, -5.0]).outside(&vp));
-        assert!(b([-1.0, 6.0, -5.0], [1.0, 8.0, -5.0]).outside(&vp));
-        assert!(b([6.0, -1.0, -5.0], [9.0, 1.0, -5.0]).outside(&vp));
-        assert!(Bounds::EMPTY.outside(&vp));
+        assert!(Bounds::EMPTY.outside(&view.view_proj()));
     }
 
     #[test]
