@@ -336,6 +336,23 @@ pub fn walk(
     }
     let report = strategy.report();
 
+    // one record of an all-geometry replay (unculled or culled): no impostors, no streaming
+    let replay_record =
+        |index: u64, t: f64, mode: Mode, eye, started: Instant, gpu_ms, tris| FrameRecord {
+            frame: index,
+            t,
+            mode,
+            cpu_ms: 1e3 * started.elapsed().as_secs_f64(),
+            gpu_ms,
+            near_triangles: 0,
+            impostor_quads: 0,
+            total_triangles: tris,
+            cell: options.grid.locate(eye).map(|c| c.id().to_string()),
+            cell_switch: false,
+            stalled: false,
+            cache_bytes: 0,
+            fallback: false,
+        };
     let mut geometry = Vec::new();
     if let (Some(full), Some(renderer)) = (&replay, &renderer) {
         for (index, t, pose) in &frames {
@@ -344,21 +361,15 @@ pub fn walk(
             renderer
                 .render(full, &view, &render_options)
                 .map_err(gpu_err(&format!("rendering geometry frame {index}")))?;
-            let record = FrameRecord {
-                frame: *index,
-                t: *t,
-                mode: Mode::Geometry,
-                cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
-                gpu_ms: renderer.last_gpu_ms(),
-                near_triangles: 0,
-                impostor_quads: 0,
+            let record = replay_record(
+                *index,
+                *t,
+                Mode::Geometry,
+                pose.eye,
+                t_frame,
+                renderer.last_gpu_ms(),
                 total_triangles,
-                cell: options.grid.locate(pose.eye).map(|c| c.id().to_string()),
-                cell_switch: false,
-                stalled: false,
-                cache_bytes: 0,
-                fallback: false,
-            };
+            );
             notify(WalkEvent::Geometry { record: &record })?;
             geometry.push(record);
         }
@@ -371,21 +382,15 @@ pub fn walk(
             let (_, stats) = renderer
                 .render_culled(scene, &view, &render_options)
                 .map_err(gpu_err(&format!("rendering geometry-culled frame {index}")))?;
-            let record = FrameRecord {
-                frame: *index,
-                t: *t,
-                mode: Mode::Culled,
-                cpu_ms: 1e3 * t_frame.elapsed().as_secs_f64(),
-                gpu_ms: renderer.last_gpu_ms(),
-                near_triangles: 0,
-                impostor_quads: 0,
-                total_triangles: stats.triangles,
-                cell: options.grid.locate(pose.eye).map(|c| c.id().to_string()),
-                cell_switch: false,
-                stalled: false,
-                cache_bytes: 0,
-                fallback: false,
-            };
+            let record = replay_record(
+                *index,
+                *t,
+                Mode::Culled,
+                pose.eye,
+                t_frame,
+                renderer.last_gpu_ms(),
+                stats.triangles,
+            );
             notify(WalkEvent::Geometry { record: &record })?;
             culled.push(record);
         }
