@@ -376,22 +376,18 @@ impl Renderer {
                     pass.draw_indexed(range.clone(), 0, 0..1);
                 }
             }
-            targets.resolve_timer(&mut encoder);
-            if readback {
-                targets.copy_to_readback(&mut encoder);
-            }
+            targets.finish_encoding(&mut encoder, readback);
             self.queue.submit([encoder.finish()]);
         })?;
-        if !readback {
-            self.last_gpu
-                .set(targets.read_timer(&self.device, &self.queue)?);
-            return Ok(None);
-        }
         // The depth target is cleared to 0; the colour alpha (255 where a fragment was written, 0
         // after the clear) tells geometry from background.
-        let (frame, ms) = targets.read_frame(&self.device, &self.queue, options.clear)?;
-        self.last_gpu.set(ms);
-        Ok(Some(frame))
+        targets.collect(
+            &self.device,
+            &self.queue,
+            readback,
+            options.clear,
+            &self.last_gpu,
+        )
     }
 }
 

@@ -10,7 +10,9 @@
 //! readback maps all buffers at once and strips row padding, converts depth and fixes the
 //! background in one pass over the rows.
 
-use crate::renderer::{padded_bytes_per_row, Frame, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
+use crate::renderer::{
+    padded_bytes_per_row, Frame, GpuTime, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
+};
 use crate::GpuError;
 
 /// The colour texture's second view format: the same bytes without sRGB encoding.
@@ -293,6 +295,33 @@ impl Targets {
             b.unmap();
         }
         Ok((frame?, ms.flatten()))
+    }
+    /// Ends a frame's encoding after its last pass: resolves the pass timer and, with `readback`,
+    /// copies colour and view depth into the readback buffers.
+    pub(crate) fn finish_encoding(&self, encoder: &mut wgpu::CommandEncoder, readback: bool) {
+        self.resolve_timer(encoder);
+        if readback {
+            self.copy_to_readback(encoder);
+        }
+    }
+
+    /// After the frame's submission: its GPU time into `time` and, with `readback`, the frame
+    /// ([`Targets::read_frame`]; background `clear`), else `None` once the GPU has finished.
+    pub(crate) fn collect(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        readback: bool,
+        clear: [u8; 4],
+        time: &GpuTime,
+    ) -> Result<Option<Frame>, GpuError> {
+        if !readback {
+            time.set(self.read_timer(device, queue)?);
+            return Ok(None);
+        }
+        let (frame, ms) = self.read_frame(device, queue, clear)?;
+        time.set(ms);
+        Ok(Some(frame))
     }
 
     /// The pass's GPU time in milliseconds (after submission of a timed and resolved pass), without

@@ -371,21 +371,17 @@ impl ImpostorRenderer {
                 }
             }
             drop(pass);
-            targets.resolve_timer(&mut encoder);
-            if readback {
-                targets.copy_to_readback(&mut encoder);
-            }
+            targets.finish_encoding(&mut encoder, readback);
             self.queue.submit([encoder.finish()]);
         })?;
-        if !readback {
-            self.last_gpu
-                .set(targets.read_timer(&self.device, &self.queue)?);
-            return Ok(None);
-        }
         // Every drawn fragment writes alpha 1; alpha 0 is the clear.
-        let (frame, ms) = targets.read_frame(&self.device, &self.queue, options.clear)?;
-        self.last_gpu.set(ms);
-        Ok(Some(frame))
+        targets.collect(
+            &self.device,
+            &self.queue,
+            readback,
+            options.clear,
+            &self.last_gpu,
+        )
     }
 }
 
