@@ -20,6 +20,7 @@ pub mod layering;
 pub mod parallax_error;
 pub mod placement;
 pub mod scene;
+pub mod serde_inf;
 
 pub use face::Face;
 pub use scene::{Aabb, Material, Mesh, Scene, SceneBuilder, SceneStats, Texture, UpAxis, Vertex};

@@ -204,7 +204,7 @@ pub struct Layer {
     pub near_border: f64,
     /// Outer border of the slab (m from the centre); infinite for the farthest layer (`null` in
     /// JSON).
-    #[serde(with = "inf_as_null")]
+    #[serde(with = "crate::serde_inf::f64_or_inf")]
     pub far_border: f64,
     /// The constraint that fixed this layer's distance to the previous (farther) layer.
     pub bound_by: Bound,
@@ -357,23 +357,6 @@ fn push_layer(layers: &mut Vec<Layer>, params: &EnvParams) {
         far_border: border,
         bound_by,
     });
-}
-
-/// Serialises an infinite `f64` as JSON `null` and reads `null` back as infinity.
-mod inf_as_null {
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f64(*v)
-        } else {
-            s.serialize_none()
-        }
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
-    }
 }
 
 #[cfg(test)]

@@ -95,7 +95,7 @@ pub struct ObjectParams {
 pub struct ObjectPlacement {
     pub layers: Vec<Layer>,
     /// Beyond this distance one layer represents everything behind it (`f ≥ b`); infinite if never.
-    #[serde(with = "super::inf_as_null")]
+    #[serde(with = "crate::serde_inf::f64_or_inf")]
     pub single_layer_beyond: f64,
     pub params: ObjectParams,
 }

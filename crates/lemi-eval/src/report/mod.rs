@@ -30,35 +30,7 @@ pub const WORST_PER_CELL: usize = 3;
 /// How many worst views a [`BundleResult`] lists.
 pub const WORST_PER_BUNDLE: usize = 10;
 
-/// `null` for non-finite numbers in JSON, read back as `+∞`.
-mod f64_or_inf {
-    use serde::{Deserialize, Deserializer, Serializer};
-    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f64(*v)
-        } else {
-            s.serialize_none()
-        }
-    }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
-    }
-}
-
-/// As [`f64_or_inf`], for `f32`.
-mod f32_or_inf {
-    use serde::{Deserialize, Deserializer, Serializer};
-    pub fn serialize<S: Serializer>(v: &f32, s: S) -> Result<S::Ok, S::Error> {
-        if v.is_finite() {
-            s.serialize_f32(*v)
-        } else {
-            s.serialize_none()
-        }
-    }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-        Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::INFINITY))
-    }
-}
+use lemi_core::serde_inf::{f32_or_inf, f64_or_inf};
 
 /// The pixel-error figures of one view.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
