@@ -24,7 +24,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut copy = faces.clone();
         let t = Instant::now();
         for f in &mut copy {
-            fill_gaps(&mut f.layers)?;
+            fill_gaps(&mut f.layers, opts.gap_sources)?;
         }
         let t_gap = t.elapsed().as_secs_f64();
         let t = Instant::now();

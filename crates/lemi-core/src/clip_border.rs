@@ -23,14 +23,11 @@ pub fn mark_clip_borders(
     res: u32,
     mask: &mut [bool],
 ) -> usize {
-    let axis = face.forward();
     let mut edges = 0;
     for tri in tris.chunks_exact(3) {
         for k in 0..3 {
             let (a, b) = (&tri[k], &tri[(k + 1) % 3]);
-            let (da, db) = (a.rel.dot(axis), b.rel.dot(axis));
-            // the clipper snaps cut vertices exactly onto the plane
-            if da != db || !planes.contains(&da) {
+            if !is_clip_edge(a, b, face, planes) {
                 continue;
             }
             let (Some(pa), Some(pb)) = (to_texel(face, a, res), to_texel(face, b, res)) else {
@@ -41,6 +38,15 @@ pub fn mark_clip_borders(
         }
     }
     edges
+}
+
+/// Whether the edge `a`–`b` of a clipped triangle is a clipping edge on one of `planes` (depths
+/// along `face`'s axis): both ends on the same plane. Exact comparison: the clipper snaps cut
+/// vertices exactly onto the plane ([`crate::clip::clip_to_slab`]).
+pub fn is_clip_edge(a: &ClipVertex, b: &ClipVertex, face: Face, planes: &[f64]) -> bool {
+    let axis = face.forward();
+    let (da, db) = (a.rel.dot(axis), b.rel.dot(axis));
+    da == db && planes.contains(&da)
 }
 
 /// Face-image position in texel units (texel `(i, j)` spans `[i, i+1] × [j, j+1]`).

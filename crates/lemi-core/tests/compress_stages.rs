@@ -4,7 +4,8 @@
 use glam::DVec3;
 use lemi_core::compress::{
     analyze_micro_textures, extract_micro_textures, fill_gaps, quad_corners, remove_hidden_texels,
-    CompressError, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect, TRANSPARENT,
+    CompressError, GapSources, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect,
+    TRANSPARENT,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
@@ -93,7 +94,7 @@ fn gap_fill_copies_opaque_border_texels_onto_opaque_and_transparent_border_texel
         "........",
     ]);
     let mut layers = vec![near.clone(), far];
-    let stats = fill_gaps(&mut layers).unwrap();
+    let stats = fill_gaps(&mut layers, GapSources::AllBorder).unwrap();
     assert_eq!(layers[0], near, "the closer layer is not changed");
     // sources: the 8 ring texels of the near block. Targets in the far layer: opaque texels and
     // transparent texels with an opaque 8-neighbour. Ring texels (2,2),(3,2),(4,2),(2,3),(4,3),
@@ -140,7 +141,7 @@ fn gap_fill_only_fills_next_to_the_distant_surface() {
         "........",
     ]);
     let mut layers = vec![near, far];
-    let stats = fill_gaps(&mut layers).unwrap();
+    let stats = fill_gaps(&mut layers, GapSources::AllBorder).unwrap();
     assert_eq!(
         to_art(&layers[1]),
         [
@@ -192,7 +193,7 @@ fn gap_fill_works_on_the_recorded_images_pair_by_pair() {
         "........",
     ]);
     let mut layers = vec![l0, l1, l2];
-    fill_gaps(&mut layers).unwrap();
+    fill_gaps(&mut layers, GapSources::AllBorder).unwrap();
     assert_eq!(
         to_art(&layers[1]),
         [
@@ -244,7 +245,7 @@ fn gap_fill_also_closes_the_diagonal_clip_edge_crack_of_the_tr() {
         }
     }
     let mut layers = vec![near, far];
-    fill_gaps(&mut layers).unwrap();
+    fill_gaps(&mut layers, GapSources::AllBorder).unwrap();
     for y in 0..res {
         for x in 0..res {
             let t = layers[1].texel(layers[1].index(x, y));
@@ -258,20 +259,81 @@ fn gap_fill_also_closes_the_diagonal_clip_edge_crack_of_the_tr() {
     }
 }
 
+/// The default rule copies only the clip-edge texels of the closer layer's far border: a surface
+/// cut at the border (a 4-connected supercover line, as the recorder covers cut edges, recorded in
+/// both layers) keeps its copy, while the silhouette of an object ending inside the closer slab
+/// (a block beside it) is no longer drawn again one layer farther back. The paper's rule copies
+/// both.
+#[test]
+fn gap_fill_by_default_copies_only_far_border_clip_edges() {
+    let near = art(&[
+        "........", //
+        ".aa.....", //
+        ".aa.....", //
+        "........", //
+        "....nnnn", //
+        "....nnnn", //
+        "........", //
+        "........",
+    ]);
+    let far = art(&[
+        "........", //
+        "...b....", //
+        "...b....", //
+        "........", //
+        "........", //
+        "....ffff", //
+        "....ffff", //
+        "....ffff",
+    ]);
+    let with_flags = |mut img: LayerImage, far_edge: bool| {
+        // the cut at the border between the layers: row 5 from x = 4, in both layers
+        for x in 4..8 {
+            let i = img.index(x, 5);
+            img.border[i] = true;
+            img.far_border[i] = far_edge;
+        }
+        img
+    };
+    let (near, far) = (with_flags(near, true), with_flags(far, false));
+    let mut layers = vec![near.clone(), far.clone()];
+    let stats = fill_gaps(&mut layers, GapSources::FarClipEdges).unwrap();
+    // the far layer already covers the cut (row 5): nothing is overwritten; the block's
+    // silhouette (a) is not copied next to b, and row 4 (the near part's other border texels) is
+    // not copied
+    assert_eq!(to_art(&layers[1]), to_art(&far));
+    assert_eq!(stats.source_texels, 4);
+    assert_eq!((stats.filled, stats.overwritten), (0, 0));
+    // where the far layer lost a texel of the cut, it is filled from the closer layer
+    let mut holed = far.clone();
+    let hole = holed.index(6, 5);
+    holed.clear_texel(hole);
+    let mut layers = vec![near.clone(), holed];
+    let stats = fill_gaps(&mut layers, GapSources::FarClipEdges).unwrap();
+    assert_eq!((stats.filled, stats.overwritten), (1, 0));
+    assert_eq!(to_art(&layers[1])[5], "....ffnf");
+    // the paper's rule also draws the block's silhouette and the near part's upper row again
+    let mut paper = vec![near, far];
+    let s = fill_gaps(&mut paper, GapSources::AllBorder).unwrap();
+    assert!(s.filled >= 4, "{s:?}");
+    assert_eq!(&to_art(&paper[1])[1][..4], "..ab");
+}
+
 #[test]
 fn gap_fill_rejects_mixed_resolutions() {
     let mut layers = vec![LayerImage::new(8), LayerImage::new(4)];
     assert!(matches!(
-        fill_gaps(&mut layers),
+        fill_gaps(&mut layers, GapSources::default()),
         Err(CompressError::ResolutionMismatch { layer: 1, .. })
     ));
     let mut bad = vec![LayerImage {
         res: 4,
         rgba: vec![0; 3],
         border: vec![false; 16],
+        far_border: vec![false; 16],
     }];
     assert!(matches!(
-        fill_gaps(&mut bad),
+        fill_gaps(&mut bad, GapSources::default()),
         Err(CompressError::BadImage { .. })
     ));
 }

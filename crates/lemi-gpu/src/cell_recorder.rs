@@ -221,6 +221,7 @@ impl<'a> CellRecorder<'a> {
                 on_layer(face, k, n);
                 let (lo, hi) = (slabs.lo(k), slabs.hi(k));
                 let near_plane = 0.5 * lo.min(near_field);
+                let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
                 let frame = self
                     .recorder
                     .record_with(
@@ -232,6 +233,7 @@ impl<'a> CellRecorder<'a> {
                         near_plane,
                         &self.lighting,
                         recording.coverage,
+                        &planes,
                     )
                     .map_err(|source| RecordError::Gpu {
                         cell: cell.id(),
@@ -244,18 +246,23 @@ impl<'a> CellRecorder<'a> {
                     continue;
                 }
                 let mut border = vec![false; (res * res) as usize];
+                let mut far_border = vec![false; (res * res) as usize];
                 if recording.crack_free {
-                    let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
-                    mark_clip_borders(&slab.vertices, face, &planes, res, &mut border);
+                    if lo.is_finite() {
+                        mark_clip_borders(&slab.vertices, face, &[lo], res, &mut border);
+                    }
+                    if hi.is_finite() {
+                        mark_clip_borders(&slab.vertices, face, &[hi], res, &mut far_border);
+                    }
                 }
-                let image = LayerImage::from_parts(res, frame.rgba, border).map_err(|source| {
-                    RecordError::Image {
+                let image = LayerImage::from_parts(res, frame.rgba, border, far_border).map_err(
+                    |source| RecordError::Image {
                         cell: cell.id(),
                         face,
                         layer: k,
                         source,
-                    }
-                })?;
+                    },
+                )?;
                 out.opaque_recorded += image.opaque_count();
                 images.push(image);
             }

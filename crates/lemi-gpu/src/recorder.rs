@@ -35,6 +35,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use lemi_core::camera::View;
 use lemi_core::clip::ClipVertex;
+use lemi_core::clip_border::is_clip_edge;
 use lemi_core::Face;
 use wgpu::util::DeviceExt;
 
@@ -61,6 +62,15 @@ pub enum Coverage {
     Conservative,
     /// Ordinary rasterization: the texels whose centre the projected triangle covers.
     CentreSampled,
+    /// Conservative only across clipping edges (edges on one of the slab's border planes, given to
+    /// [`LayerRecorder::record_with`]), centre-sampled across every other edge: a surface cut at a
+    /// border still covers every texel its cut touches in both layers (TR sec. 2.2, no cracks),
+    /// while silhouettes and outlines land where the reference renderer puts them instead of
+    /// growing by up to a texel. Edges shared by two triangles of a slab stay watertight: a texel
+    /// centre on the shared edge counts as inside both. Not yet what the bake records with: on the
+    /// crack test's terrain it leaves a few background pixels where a far surface crosses the
+    /// seam of two faces, which full conservative coverage closes.
+    ClipEdges,
 }
 
 /// One recorded layer, rows top to bottom in the texel convention of [`lemi_core::face`].
@@ -259,10 +269,13 @@ impl LayerRecorder {
             near,
             lighting,
             Coverage::Conservative,
+            &[],
         )
     }
 
-    /// [`LayerRecorder::record`] with a choice of [`Coverage`].
+    /// [`LayerRecorder::record`] with a choice of [`Coverage`]; `clip_planes` are the depths
+    /// along the face axis (relative to `center`) of the slab's borders, whose clipping edges
+    /// [`Coverage::ClipEdges`] covers conservatively (ignored by the other modes).
     #[allow(clippy::too_many_arguments)]
     pub fn record_with(
         &self,
@@ -274,6 +287,7 @@ impl LayerRecorder {
         near: f64,
         lighting: &Lighting,
         coverage: Coverage,
+        clip_planes: &[f64],
     ) -> Result<LayerFrame, GpuError> {
         if !center.is_finite() {
             return Err(GpuError::Invalid(format!(
@@ -324,8 +338,14 @@ impl LayerRecorder {
         globals.params[3] = match coverage {
             Coverage::Conservative => 0.0,
             Coverage::CentreSampled => 1.0,
+            Coverage::ClipEdges => 2.0,
         };
-        let vertices = rec_vertices(triangles);
+        let planes = if coverage == Coverage::ClipEdges {
+            clip_planes
+        } else {
+            &[]
+        };
+        let vertices = rec_vertices(triangles, face, planes);
         let targets = self
             .targets
             .lock()
@@ -382,10 +402,14 @@ impl LayerRecorder {
 
 /// The non-indexed vertex stream: each vertex with its whole triangle, positions in f32 relative to
 /// the cell centre (the f64 → f32 rounding happens after the centre was subtracted), colours
-/// normalised to [0, 1].
-fn rec_vertices(triangles: &[ClipVertex]) -> Vec<RecVertex> {
+/// normalised to [0, 1]. `corner` is the corner index (bits 0–1) and, from bit 2, one bit per edge
+/// `k → k+1` that is a clipping edge on one of `planes` ([`is_clip_edge`]).
+fn rec_vertices(triangles: &[ClipVertex], face: Face, planes: &[f64]) -> Vec<RecVertex> {
     let mut out = Vec::with_capacity(triangles.len());
     for tri in triangles.chunks_exact(3) {
+        let clip_edges = (0..3)
+            .filter(|&k| is_clip_edge(&tri[k], &tri[(k + 1) % 3], face, planes))
+            .fold(0u32, |bits, k| bits | 1 << (2 + k));
         let v = RecVertex {
             positions: [0, 1, 2].map(|k| tri[k].rel.as_vec3().to_array()),
             corner: 0,
@@ -394,7 +418,10 @@ fn rec_vertices(triangles: &[ClipVertex]) -> Vec<RecVertex> {
             uv2: tri[2].uv,
             colors: [0, 1, 2].map(|k| tri[k].color.map(|c| (c / 255.0).clamp(0.0, 1.0))),
         };
-        out.extend((0..3).map(|corner| RecVertex { corner, ..v }));
+        out.extend((0..3).map(|corner| RecVertex {
+            corner: corner | clip_edges,
+            ..v
+        }));
     }
     out
 }
@@ -412,7 +439,7 @@ mod tests {
             uv: [0.0; 2],
             color: [255.0, 510.0, 0.0, 255.0],
         };
-        let r = rec_vertices(&[v(0.0), v(1.0), v(2.0)]);
+        let r = rec_vertices(&[v(0.0), v(1.0), v(2.0)], Face::PosZ, &[]);
         assert_eq!(r.len(), 3);
         assert_eq!(r.iter().map(|v| v.corner).collect::<Vec<_>>(), [0, 1, 2]);
         assert_eq!(r[1].positions, r[0].positions);
@@ -443,7 +470,9 @@ mod tests {
 
     /// Centre-sampled recording covers exactly the texels whose centre lies inside the projected
     /// triangle (ties within 0.01 px aside), a subset of the conservative coverage, which covers
-    /// more (the texels the triangle only touches).
+    /// more (the texels the triangle only touches). Clip-edge coverage lies between them: with no
+    /// clipping edge it is the centre-sampled coverage; with edge 0 → 1 on a border plane it adds
+    /// the texels that edge passes through and no others.
     #[test]
     fn centre_sampled_coverage_is_the_texel_centres_inside() {
         let Some(gpu) = Gpu::for_tests() else { return };
@@ -464,15 +493,20 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let face = Face::PosZ;
-        let (mut extra, mut centre_total) = (0usize, 0usize);
+        let (mut extra, mut centre_total, mut clip_extra) = (0usize, 0usize, 0usize);
         for _ in 0..24 {
             let depth = 5.0 + 5.0 * rnd();
+            // corners 0 and 1 share their depth: edge 0 → 1 lies on the plane `plane`
+            let shared = depth * (1.0 + 0.2 * rnd());
+            let mut n = 0;
             let mut corner = || {
-                let rel = face.point(
-                    1.6 * rnd() - 0.8,
-                    1.6 * rnd() - 0.8,
-                    depth * (1.0 + 0.2 * rnd()),
-                );
+                n += 1;
+                let d = if n <= 2 {
+                    shared
+                } else {
+                    depth * (1.0 + 0.2 * rnd())
+                };
+                let rel = face.point(1.6 * rnd() - 0.8, 1.6 * rnd() - 0.8, d);
                 ClipVertex {
                     rel,
                     normal: [0.0, 0.0, 1.0],
@@ -481,17 +515,20 @@ mod tests {
                 }
             };
             let tri = [corner(), corner(), corner()];
+            let plane = tri[0].rel.dot(face.forward());
             let runs = [MaterialRun {
                 material: 0,
                 first: 0,
                 count: 1,
             }];
-            let rec_with = |c| {
-                rec.record_with(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l, c)
+            let rec_with = |c, planes: &[f64]| {
+                rec.record_with(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l, c, planes)
                     .expect("record")
             };
-            let cons = rec_with(Coverage::Conservative);
-            let centre = rec_with(Coverage::CentreSampled);
+            let cons = rec_with(Coverage::Conservative, &[plane]);
+            let centre = rec_with(Coverage::CentreSampled, &[plane]);
+            let unclipped = rec_with(Coverage::ClipEdges, &[]);
+            let clipped = rec_with(Coverage::ClipEdges, &[plane]);
             assert_eq!(
                 cons,
                 rec.record(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l)
@@ -507,6 +544,28 @@ mod tests {
                     let covered = centre.covered(i, j);
                     if let Some(inside) = centre_inside(c, &p, 0.01) {
                         assert_eq!(covered, inside, "texel ({i}, {j}) of {p:?}");
+                        assert_eq!(unclipped.covered(i, j), inside, "clip-edge mode, no plane");
+                        if inside {
+                            assert!(clipped.covered(i, j), "clip-edge mode misses ({i}, {j})");
+                        }
+                    }
+                    if clipped.covered(i, j) {
+                        assert!(cons.covered(i, j), "clip-edge mode beyond conservative");
+                        // beyond the centre-sampled texels only those the clipping edge
+                        // touches (0.01 px of slack for rounding)
+                        let (a, b) = (p[0], p[1]);
+                        let r = 0.5 + 0.01;
+                        let n = (b - a).perp();
+                        let touches = a.min(b).cmple(c + r).all()
+                            && a.max(b).cmpge(c - r).all()
+                            && n.dot(c - a).abs() <= r * (n.x.abs() + n.y.abs());
+                        assert!(
+                            covered || centre_inside(c, &p, 0.01) != Some(false) || touches,
+                            "clip-edge mode covers ({i}, {j}) of {p:?}, away from the clipping edge"
+                        );
+                        if !covered {
+                            clip_extra += 1;
+                        }
                     }
                     if covered {
                         assert!(cons.covered(i, j), "conservative misses ({i}, {j})");
@@ -516,9 +575,22 @@ mod tests {
                     }
                 }
             }
+            // every texel the clipping edge passes through is covered
+            let mut on_edge = vec![false; (res * res) as usize];
+            lemi_core::clip_border::traverse(p[0], p[1], res, &mut on_edge);
+            for (k, _) in on_edge.iter().enumerate().filter(|(_, &e)| e) {
+                let (i, j) = (k as u32 % res, k as u32 / res);
+                assert!(
+                    clipped.covered(i, j),
+                    "clipping edge texel ({i}, {j}) of {p:?}"
+                );
+            }
             centre_total += centre.covered_count();
             extra += cons.covered_count() - centre.covered_count();
         }
-        assert!(centre_total > 0 && extra > 0, "{centre_total} {extra}");
+        assert!(
+            centre_total > 0 && extra > 0 && clip_extra > 0 && clip_extra < extra,
+            "{centre_total} {extra} {clip_extra}"
+        );
     }
 }

@@ -15,6 +15,11 @@
 // (Schaufler's layered impostors): the vertex shader emits the original corners and the fragment
 // shader skips the texel/triangle overlap test and the overshoot depth push-back. The conservative
 // path computes exactly what it did before the mode existed (the mode only selects at the end).
+// Mode 2 covers a texel when its centre is inside the triangle (as ordinary rasterization) or its
+// square touches one of the triangle's clipping edges (edges on a slab border, flagged per vertex
+// from bit 2 of `corner`): silhouettes land where ordinary rasterization puts them while every
+// texel a cut passes through is covered, so cuts stay crack-free. A triangle without clipping
+// edges is rasterized as it is; one with clipping edges is dilated as in mode 0 and tested here.
 
 struct RecIn {
     @location(0) p0: vec3<f32>,
@@ -47,6 +52,8 @@ struct RecOut {
     @location(9) @interpolate(flat) c0: vec4<f32>,
     @location(10) @interpolate(flat) c1: vec4<f32>,
     @location(11) @interpolate(flat) c2: vec4<f32>,
+    // Mode 2: bit k set when edge k → k+1 is a clipping edge.
+    @location(12) @interpolate(flat) clip_edges: u32,
 };
 
 struct FragmentOut {
@@ -58,6 +65,8 @@ struct FragmentOut {
 // Half a texel in framebuffer pixels, grown by a hair so that squares merely touching the triangle
 // count as covered despite rounding.
 const HALF: f32 = 0.5005;
+// Slack of the clip-edge mode's centre test (px): more than the rasterizer's vertex snapping.
+const TIE: f32 = 1.0 / 64.0;
 
 fn to_pixel(c: vec4<f32>) -> vec2<f32> {
     let res = globals.params.y;
@@ -80,7 +89,9 @@ fn edge_line(a: vec2<f32>, b: vec2<f32>) -> vec3<f32> {
 @vertex
 fn vs_main(v: RecIn) -> RecOut {
     let rel = array<vec3<f32>, 3>(v.p0, v.p1, v.p2);
-    let k = v.corner % 3u;
+    let k = (v.corner & 3u) % 3u;
+    // Mode 2: which edges are clipping edges (a triangle without any is not dilated, below).
+    let clip_edges = (v.corner >> 2u) & 7u;
     var clip: array<vec4<f32>, 3>;
     var px: array<vec2<f32>, 3>;
     for (var i = 0u; i < 3u; i++) {
@@ -188,7 +199,12 @@ fn vs_main(v: RecIn) -> RecOut {
     out.view_depth = w;
     out.tri01 = vec4<f32>(px[0], px[1]);
     out.tri2 = vec4<f32>(px[2], w_min, w_max);
-    if (globals.params.w > 0.5) {
+    out.clip_edges = clip_edges;
+    // Mode 2, a triangle without clipping edges: the original corners (as in mode 1), so a
+    // triangle sharing an edge rasterizes the same line bit for bit and the rasterizer's tie
+    // rule keeps the pair watertight.
+    let unmoved = globals.params.w > 1.5 && clip_edges == 0u;
+    if ((globals.params.w > 0.5 && globals.params.w < 1.5) || unmoved) {
         // Centre-sampled: the original corner, its own barycentrics and depth.
         var unit = vec3<f32>(0.0);
         unit[k] = 1.0;
@@ -200,14 +216,23 @@ fn vs_main(v: RecIn) -> RecOut {
 }
 
 // True when the projection of the triangle on the line direction n and that of the texel square
-// centred at c (half size HALF) are disjoint (a separating axis).
-fn separated(n: vec2<f32>, c: vec2<f32>, a: vec2<f32>, b: vec2<f32>, d: vec2<f32>) -> bool {
+// centred at c (half size `half`: HALF, or 0 for the texel centre alone) are disjoint (a
+// separating axis).
+fn separated(n: vec2<f32>, c: vec2<f32>, a: vec2<f32>, b: vec2<f32>, d: vec2<f32>, half: f32) -> bool {
     let pa = dot(n, a);
     let pb = dot(n, b);
     let pd = dot(n, d);
-    let r = HALF * (abs(n.x) + abs(n.y));
+    let r = half * (abs(n.x) + abs(n.y));
     let pc = dot(n, c);
     return pc + r < min(min(pa, pb), pd) || pc - r > max(max(pa, pb), pd);
+}
+
+// True when the texel square centred at c (half size HALF) touches the segment p–q.
+fn touches_segment(c: vec2<f32>, p: vec2<f32>, q: vec2<f32>) -> bool {
+    let e = q - p;
+    return !(separated(vec2<f32>(1.0, 0.0), c, p, q, q, HALF)
+        || separated(vec2<f32>(0.0, 1.0), c, p, q, q, HALF)
+        || separated(vec2<f32>(-e.y, e.x), c, p, q, q, HALF));
 }
 
 @fragment
@@ -226,23 +251,39 @@ fn fs_main(in: RecOut) -> FragmentOut {
     let albedo = surface_albedo(s);
     // Exact texel-square / triangle overlap by separating axes (the two box axes and the three edge
     // normals): removes the dilation's overshoot at acute corners and around degenerate triangles.
-    // (Not in the centre-sampled mode: the rasterizer's own coverage is the answer there.)
-    let conservative = globals.params.w <= 0.5;
+    // (Not in the centre-sampled mode: the rasterizer's own coverage is the answer there, nor in
+    // mode 2 for a triangle without clipping edges, which is rasterized undilated.)
+    let mode2 = globals.params.w > 1.5;
+    let conservative = globals.params.w <= 0.5 || (mode2 && in.clip_edges != 0u);
     let c = in.clip.xy;
     let a = in.tri01.xy;
     let b = in.tri01.zw;
     let d = in.tri2.xy;
-    if (conservative && (separated(vec2<f32>(1.0, 0.0), c, a, b, d)
-        || separated(vec2<f32>(0.0, 1.0), c, a, b, d))) {
-        discard;
-    }
     let eab = b - a;
     let ebd = d - b;
     let eda = a - d;
-    if (conservative && (separated(vec2<f32>(-eab.y, eab.x), c, a, b, d)
-        || separated(vec2<f32>(-ebd.y, ebd.x), c, a, b, d)
-        || separated(vec2<f32>(-eda.y, eda.x), c, a, b, d))) {
-        discard;
+    if (mode2 && conservative) {
+        // Centre inside the triangle, or the square touching a clipping edge (separating axes
+        // of a segment). Inside is inclusive by TIE px, so that a neighbour across a shared edge
+        // rasterized by the hardware (vertices snapped to its sub-pixel grid) never leaves a
+        // centre on the edge to neither triangle.
+        let inside = !(separated(vec2<f32>(-eab.y, eab.x), c, a, b, d, TIE)
+            || separated(vec2<f32>(-ebd.y, ebd.x), c, a, b, d, TIE)
+            || separated(vec2<f32>(-eda.y, eda.x), c, a, b, d, TIE));
+        let touch = ((in.clip_edges & 1u) != 0u && touches_segment(c, a, b))
+            || ((in.clip_edges & 2u) != 0u && touches_segment(c, b, d))
+            || ((in.clip_edges & 4u) != 0u && touches_segment(c, d, a));
+        if (!(inside || touch)) {
+            discard;
+        }
+    } else if (conservative) {
+        if (separated(vec2<f32>(1.0, 0.0), c, a, b, d, HALF)
+            || separated(vec2<f32>(0.0, 1.0), c, a, b, d, HALF)
+            || separated(vec2<f32>(-eab.y, eab.x), c, a, b, d, HALF)
+            || separated(vec2<f32>(-ebd.y, ebd.x), c, a, b, d, HALF)
+            || separated(vec2<f32>(-eda.y, eda.x), c, a, b, d, HALF)) {
+            discard;
+        }
     }
     if (albedo.a < globals.params.x) {
         discard;

@@ -10,6 +10,22 @@
 //! > that are either opaque texels or transparent border texels (transparent texels that have at
 //! > least one opaque neighbor).
 //!
+//! **Which texels are copied** ([`GapSources`]). Read literally, the rule copies *every* opaque
+//! border texel, including the silhouettes of objects that end inside the closer slab: such a
+//! texel is then also drawn one layer farther back, where it shows a point of slab `k` on layer
+//! `k+1`'s plane, up to about three times α off (measured by the certificate), and fattens the
+//! silhouette by the layers' relative shift. A gap, though, opens only where a surface continues
+//! across the border between the two slabs, i.e. along the clipping edges on that border (TR sec.
+//! 2.2). So by default ([`GapSources::FarClipEdges`]) only the opaque border texels that lie on a
+//! clipping edge of the closer layer's *far* border ([`LayerImage::far_border`]) are copied: their
+//! surface reaches the border plane, the near end of the more distant slab, whose points the
+//! placement keeps within α of layer `k+1`. Both layers normally cover every texel a cut passes
+//! through already (the recorder covers cuts conservatively), so this rule only *fills*: it copies
+//! a cut's texel where the more distant layer lacks it, and leaves the more distant layer's own
+//! texels as recorded (the paper overwrites them with the closer layer's colour, a sample of the
+//! closer slab that can be far from the border on a grazing surface). [`GapSources::AllBorder`]
+//! is the paper's rule as written, kept for comparison.
+//!
 //! Choices the paper leaves open, made here:
 //! - *neighbour* means the 8-neighbourhood (the shift between layers can be diagonal); neighbours
 //!   outside the face image are ignored (the surface may continue on the adjacent face);
@@ -28,12 +44,23 @@ use rayon::prelude::*;
 use super::layer_image::{all3x3, any3x3, common_res, LayerImage};
 use super::CompressError;
 
+/// Which opaque border texels of the closer layer gap filling copies (see the module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GapSources {
+    /// Those on a clipping edge of the closer layer's far border (the default).
+    #[default]
+    FarClipEdges,
+    /// All of them, silhouettes included (GI 2002 sec. 5.1 read literally).
+    AllBorder,
+}
+
 /// What gap filling did to one face's layer stack.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GapFillStats {
     /// Adjacent layer pairs processed.
     pub pairs: u64,
-    /// Opaque border texels of the closer layers (the candidate sources).
+    /// Opaque border texels of the closer layers that [`GapSources`] selects (the candidate
+    /// sources).
     pub source_texels: u64,
     /// Copies into transparent border texels (new opaque texels).
     pub filled: u64,
@@ -83,11 +110,24 @@ fn masks(layer: &LayerImage) -> Masks {
     }
 }
 
-/// Gap filling (GI 2002 sec. 5.1) over one face's layers, ordered **nearest first**
-/// (`layers[0]` is closest to the view cell). Modifies the more distant layer of every pair.
-pub fn fill_gaps(layers: &mut [LayerImage]) -> Result<GapFillStats, CompressError> {
+/// What gap filling writes into one face's layer stack: per adjacent pair `(k, k+1)` (nearest
+/// first), the texels of layer `k+1` it sets (linear index) and the colour of layer `k` they
+/// take, plus the statistics. [`fill_gaps`] applies it; tests use it to check every copied texel.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GapFillPlan {
+    /// `writes[k]`: the texels written into layer `k + 1`.
+    pub writes: Vec<Vec<(usize, [u8; 4])>>,
+    pub stats: GapFillStats,
+}
+
+/// Plans gap filling (GI 2002 sec. 5.1, sources chosen by `sources`) over one face's layers,
+/// ordered **nearest first** (`layers[0]` is closest to the view cell), without changing them.
+pub fn plan_gap_fill(
+    layers: &[LayerImage],
+    sources: GapSources,
+) -> Result<GapFillPlan, CompressError> {
     if common_res(layers)?.is_none() || layers.len() < 2 {
-        return Ok(GapFillStats::default());
+        return Ok(GapFillPlan::default());
     }
     let all_masks: Vec<Masks> = layers.par_iter().map(masks).collect();
     // writes into layer k+1 from the original layer k
@@ -100,12 +140,15 @@ pub fn fill_gaps(layers: &mut [LayerImage]) -> Result<GapFillStats, CompressErro
                 ..Default::default()
             };
             let mut w = Vec::new();
+            let far_border = &layers[k].far_border;
             for (i, &b) in src.opaque_border.iter().enumerate() {
-                if !b {
+                if !b || (sources == GapSources::FarClipEdges && !far_border[i]) {
                     continue;
                 }
                 stats.source_texels += 1;
-                if dst.target[i] {
+                // the paper also overwrites opaque targets; along a cut both layers already
+                // cover the texel, and the more distant layer's own sample is the one within α
+                if dst.target[i] && !(sources == GapSources::FarClipEdges && dst.opaque[i]) {
                     if dst.opaque[i] {
                         stats.overwritten += 1;
                     } else {
@@ -117,19 +160,33 @@ pub fn fill_gaps(layers: &mut [LayerImage]) -> Result<GapFillStats, CompressErro
             (w, stats)
         })
         .collect();
-    let mut total = GapFillStats::default();
-    for (_, s) in &writes {
-        total.add(s);
+    let mut plan = GapFillPlan::default();
+    for (w, s) in writes {
+        plan.stats.add(&s);
+        plan.writes.push(w);
+    }
+    Ok(plan)
+}
+
+/// Gap filling (GI 2002 sec. 5.1) over one face's layers, ordered **nearest first**
+/// (`layers[0]` is closest to the view cell). Modifies the more distant layer of every pair.
+pub fn fill_gaps(
+    layers: &mut [LayerImage],
+    sources: GapSources,
+) -> Result<GapFillStats, CompressError> {
+    let plan = plan_gap_fill(layers, sources)?;
+    if plan.writes.is_empty() {
+        return Ok(plan.stats);
     }
     layers[1..]
         .par_iter_mut()
-        .zip(writes.par_iter())
-        .for_each(|(layer, (w, _))| {
+        .zip(plan.writes.par_iter())
+        .for_each(|(layer, w)| {
             for &(i, rgba) in w {
                 layer.set_texel(i, rgba);
             }
         });
-    Ok(total)
+    Ok(plan.stats)
 }
 
 /// Closes the seam between the near geometry and the innermost layer: the near geometry is drawn

@@ -26,6 +26,11 @@ pub struct LayerImage {
     /// `res · res` flags: texel written by the clipping edge of a polygon cut at one of this
     /// layer's borders (TR sec. 2.2). Hidden-texel removal does not let these texels occlude.
     pub border: Vec<bool>,
+    /// `res · res` flags, a subset of [`LayerImage::border`]: the texels of clipping edges on the
+    /// layer's *far* border, the plane it shares with the next more distant layer, where a
+    /// surface continues into that layer. Gap filling copies only these (see
+    /// [`super::gap_fill`]).
+    pub far_border: Vec<bool>,
 }
 
 impl LayerImage {
@@ -36,24 +41,44 @@ impl LayerImage {
             res,
             rgba: vec![0; 4 * n],
             border: vec![false; n],
+            far_border: vec![false; n],
         }
     }
 
-    /// Builds an image from its parts, checking the buffer sizes.
-    pub fn from_parts(res: u32, rgba: Vec<u8>, border: Vec<bool>) -> Result<Self, CompressError> {
-        let image = LayerImage { res, rgba, border };
+    /// Builds an image from its parts, checking the buffer sizes; `far_border` is the part of
+    /// `border` on the layer's far border (see [`LayerImage::far_border`]; it is made a subset).
+    pub fn from_parts(
+        res: u32,
+        rgba: Vec<u8>,
+        border: Vec<bool>,
+        far_border: Vec<bool>,
+    ) -> Result<Self, CompressError> {
+        let mut image = LayerImage {
+            res,
+            rgba,
+            border,
+            far_border,
+        };
         image.validate()?;
+        for (b, f) in image.border.iter_mut().zip(&image.far_border) {
+            *b |= *f;
+        }
         Ok(image)
     }
 
     /// Checks that the buffers match `res`.
     pub fn validate(&self) -> Result<(), CompressError> {
         let n = self.res as usize * self.res as usize;
-        if self.res == 0 || self.rgba.len() != 4 * n || self.border.len() != n {
+        if self.res == 0
+            || self.rgba.len() != 4 * n
+            || self.border.len() != n
+            || self.far_border.len() != n
+        {
             return Err(CompressError::BadImage {
                 res: self.res,
                 rgba_len: self.rgba.len(),
                 border_len: self.border.len(),
+                far_border_len: self.far_border.len(),
             });
         }
         Ok(())
@@ -85,10 +110,11 @@ impl LayerImage {
         self.rgba[4 * i + 3] >= OPAQUE_ALPHA
     }
 
-    /// Makes a texel transparent (and clears its clip-border flag).
+    /// Makes a texel transparent (and clears its clip-border flags).
     pub fn clear_texel(&mut self, i: usize) {
         self.set_texel(i, TRANSPARENT);
         self.border[i] = false;
+        self.far_border[i] = false;
     }
 
     /// Number of opaque texels.

@@ -21,7 +21,9 @@ pub mod micro_textures;
 
 use rayon::prelude::*;
 
-pub use gap_fill::{close_near_seam, fill_gaps, GapFillStats};
+pub use gap_fill::{
+    close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
+};
 pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
@@ -38,11 +40,12 @@ use crate::face::Face;
 /// Errors of the compression stages; each says what is wrong with which input.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CompressError {
-    #[error("layer image of resolution {res} has {rgba_len} RGBA bytes and {border_len} border flags (expected res²·4 and res², res ≥ 1)")]
+    #[error("layer image of resolution {res} has {rgba_len} RGBA bytes, {border_len} border flags and {far_border_len} far-border flags (expected res²·4, res² and res², res ≥ 1)")]
     BadImage {
         res: u32,
         rgba_len: usize,
         border_len: usize,
+        far_border_len: usize,
     },
     #[error("layer {layer} has resolution {found}, the other layers of its face {expected}")]
     ResolutionMismatch {
@@ -78,6 +81,8 @@ pub struct CompressOptions {
     /// (Schaufler's layered impostors, `Layering::Equidistant`): the layers then go to hidden-texel
     /// removal as recorded and [`CompressStats::gap_fill`] stays zero.
     pub gap_fill: bool,
+    /// Which texels gap filling copies (default: clipping edges of the far border).
+    pub gap_sources: GapSources,
     pub hidden: HiddenTexelOptions,
     pub micro: MicroTextureOptions,
     pub packing: PackingOptions,
@@ -87,6 +92,7 @@ impl Default for CompressOptions {
     fn default() -> Self {
         CompressOptions {
             gap_fill: true,
+            gap_sources: GapSources::default(),
             hidden: HiddenTexelOptions::default(),
             micro: MicroTextureOptions::default(),
             packing: PackingOptions::default(),
@@ -168,7 +174,7 @@ pub fn compress_cell(
                 f.layers.reverse();
             }
             let gaps = if options.gap_fill {
-                fill_gaps(&mut f.layers)
+                fill_gaps(&mut f.layers, options.gap_sources)
             } else {
                 Ok(GapFillStats::default())
             };
@@ -241,13 +247,17 @@ mod tests {
             }
             l
         };
+        // the cut between them runs along the near block's last column (x = 5)
+        let mut near = block(2, 6, [255, 0, 0, 255]);
+        for y in 4..12 {
+            let i = near.index(5, y);
+            near.border[i] = true;
+            near.far_border[i] = true;
+        }
         vec![FaceLayers {
             face: Face::PosZ,
             distances: vec![50.0, 100.0],
-            layers: vec![
-                block(2, 6, [255, 0, 0, 255]),
-                block(6, 10, [0, 0, 255, 255]),
-            ],
+            layers: vec![near, block(6, 10, [0, 0, 255, 255])],
         }]
     }
 

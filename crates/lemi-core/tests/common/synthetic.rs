@@ -42,7 +42,9 @@ pub fn synthetic_face(face: Face, res: u32, layers: usize, blobs: usize, seed: u
             for x in 0..res {
                 let i = img.index(x, y);
                 img.set_texel(i, ground);
-                img.border[i] = (y == lo && k + 1 < layers) || (y == hi && k > 0);
+                // the row shared with the next more distant layer is this layer's far border
+                img.far_border[i] = y == lo && k + 1 < layers;
+                img.border[i] = img.far_border[i] || (y == hi && k > 0);
             }
         }
         for _ in 0..blobs {
