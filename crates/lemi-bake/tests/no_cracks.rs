@@ -459,6 +459,8 @@ struct CopyOptions {
     /// Merge micro-textures sharing a whole edge (`MicroTextureOptions::merge`, as the baker
     /// does).
     merge: bool,
+    /// Which texels gap filling copies (the baker: the default).
+    gap_sources: GapSources,
 }
 
 /// The bake pipeline of [`Baker::bake`] rebuilt from public parts (placement, classification,
@@ -468,6 +470,7 @@ fn bake_copy(gpu: &Gpu, scene: &Scene, params: &BakeParams, coverage: Coverage) 
         coverage,
         near_gap_fill: true,
         merge: true,
+        gap_sources: GapSources::default(),
     };
     bake_copy_stages(gpu, scene, params, options).0
 }
@@ -626,6 +629,7 @@ fn bake_copy_stages(
             threshold: params.micro_threshold,
             merge: copy.merge,
         },
+        gap_sources: copy.gap_sources,
         ..Default::default()
     };
     let raw = faces.clone();
@@ -1172,6 +1176,7 @@ fn merged_micro_textures_change_only_seam_pixels() {
         coverage: Coverage::Conservative,
         near_gap_fill: true,
         merge,
+        gap_sources: GapSources::default(),
     };
     let (paper, _) = bake_copy_stages(&gpu, &scene, &params, copy(false));
     let (merged, _) = bake_copy_stages(&gpu, &scene, &params, copy(true));
@@ -1411,6 +1416,11 @@ fn explain_cracks() {
         },
         near_gap_fill: var("NONEARFILL").is_none(),
         merge: var("NOMERGE").is_none(),
+        gap_sources: if var("CLIPEDGES").is_some() {
+            GapSources::FarClipEdges
+        } else {
+            GapSources::default()
+        },
     };
     let (mut baked, raw) = bake_copy_stages(&gpu, &scene, &params, copy);
     if let Some(eps) = var("EXPAND").and_then(|v| v.parse::<f32>().ok()) {
@@ -1558,14 +1568,14 @@ fn explain_cracks() {
 /// copies into a more distant layer shows the closer layer's surface point (its recorded depth
 /// at the texel centre) on the more distant layer's plane. Brute force: from every corner, edge
 /// midpoint and the centre of the cell and 40 random points in it, the angle between where that
-/// point is drawn and where it is stays within α (with 0.5 % for f32 depths) for the default rule
-/// (only clip-edge texels of the far border are copied; `GapSources::FarClipEdges`) on scenes with
+/// point is drawn and where it is stays within α (with 0.5 % for f32 depths) for the clip-edge
+/// rule (only clip-edge texels of the far border are copied; `GapSources::FarClipEdges`) on scenes with
 /// surfaces crossing many slabs (terrain, boxes, a closed shell) and thin poles ending inside
 /// their slabs. The paper's rule as written (`GapSources::AllBorder`: every opaque border texel,
 /// silhouettes included) fails the same check on the same layers (up to about 2.4 α). With the
-/// conservative recorder the default rule finds nothing to fill on these scenes (both layers
-/// cover every texel a cut passes through), and the crack tests above confirm that no gap opens
-/// without the paper's copies.
+/// conservative recorder the clip-edge rule finds nothing to fill on these scenes (both layers
+/// cover every texel a cut passes through), and `the_clip_edge_gap_rule_opens_no_crack`
+/// confirms that no gap opens without the paper's copies.
 #[test]
 fn gap_filled_texels_are_displayed_within_alpha() {
     let Some(gpu) = gpu() else { return };
@@ -1657,4 +1667,40 @@ fn gap_filled_texels_are_displayed_within_alpha() {
         paper_worst > 1.5,
         "the paper's rule should exceed α on these scenes (worst {paper_worst:.3} α)"
     );
+}
+
+/// The clip-edge gap rule (`GapSources::FarClipEdges`) keeps the three crack scenes crack-free:
+/// the paper's copies of silhouettes and its overwrites are not what closes the gaps between
+/// layers; the conservative recording of the cuts in both layers is.
+#[test]
+fn the_clip_edge_gap_rule_opens_no_crack() {
+    let Some(gpu) = gpu() else { return };
+    let cases: [(&str, Scene, &[Face], Vec<(String, DVec3)>); 3] = [
+        ("terrain", terrain_scene(), &HORIZONTAL, horizontal_dirs()),
+        ("boxes", boxes_scene(), &HORIZONTAL, horizontal_dirs()),
+        ("shell", shell_scene(), &ALL_FACES, all_dirs()),
+    ];
+    let eyes = eyes(&cell());
+    for (name, scene, faces, dirs) in cases {
+        let params = params(faces);
+        let copy = CopyOptions {
+            coverage: Coverage::Conservative,
+            near_gap_fill: true,
+            merge: true,
+            gap_sources: GapSources::FarClipEdges,
+        };
+        let (baked, _) = bake_copy_stages(&gpu, &scene, &params, copy);
+        let eval = evaluate(&gpu, &scene, &baked, &eyes, &dirs, None);
+        eprintln!(
+            "{name} (clip-edge gap rule): {} views, {} cracks, {} strict background pixels",
+            eval.views.len(),
+            eval.cracks(),
+            eval.strict_background()
+        );
+        assert_eq!(
+            eval.cracks(),
+            0,
+            "{name}: cracks with the clip-edge gap rule"
+        );
+    }
 }
