@@ -1675,7 +1675,8 @@ fn gap_filled_texels_are_displayed_within_alpha() {
 #[test]
 fn the_clip_edge_gap_rule_opens_no_crack() {
     let Some(gpu) = gpu() else { return };
-    let cases: [(&str, Scene, &[Face], Vec<(String, DVec3)>); 3] = [
+    type Case = (&'static str, Scene, &'static [Face], Vec<(String, DVec3)>);
+    let cases: [Case; 3] = [
         ("terrain", terrain_scene(), &HORIZONTAL, horizontal_dirs()),
         ("boxes", boxes_scene(), &HORIZONTAL, horizontal_dirs()),
         ("shell", shell_scene(), &ALL_FACES, all_dirs()),
