@@ -34,12 +34,14 @@ pub fn open(bundle: &Path, scene_override: &[String], quiet: bool) -> Result<(Bu
         OpenBundleError::WrongScene {
             bundle,
             sources,
+            scheme,
             source,
         } => anyhow::Error::new(source).context(format!(
             "the scene {} is not the one {} was baked from; pass the original scene with --scene, \
-             or bake again",
+             or bake again{}",
             sources.join(" "),
-            bundle.display()
+            bundle.display(),
+            lemi_scene::legacy_note(scheme)
         )),
         e => e.into(),
     })?;

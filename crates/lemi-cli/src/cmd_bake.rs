@@ -328,6 +328,9 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
     let (scene, load_seconds) = load_scene(&scene_args, args.json)?;
     let fingerprint =
         lemi_scene::fingerprint(&sources, args.up.into()).context("fingerprinting the scene")?;
+    if let Some(w) = older_fingerprint_warning(&out) {
+        warnings.push(w);
+    }
     let region = match args.region {
         Some(r) => r,
         None => {
@@ -388,6 +391,25 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         backend,
         warnings,
         load_seconds,
+    })
+}
+
+/// A warning when the bundle being resumed was fingerprinted under an older scheme: its cells carry
+/// that fingerprint, so they are baked again rather than skipped.
+fn older_fingerprint_warning(bundle: &std::path::Path) -> Option<String> {
+    let path = lemi_core::bundle::manifest_path(bundle);
+    let bytes = std::fs::read(&path).ok()?;
+    let manifest: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+    let fp = manifest.get("scene")?.get("fingerprint")?.as_str()?;
+    let scheme = lemi_scene::FingerprintScheme::of(fp)?;
+    (scheme != lemi_scene::FingerprintScheme::CURRENT).then(|| {
+        format!(
+            "{} was baked under scene fingerprint scheme {} (which also hashed files beside the \
+             scene that it does not use); its cells are baked again under scheme {}, not skipped",
+            path.display(),
+            scheme.number(),
+            lemi_scene::FingerprintScheme::CURRENT.number()
+        )
     })
 }
 

@@ -8,7 +8,7 @@ use lemi_core::bundle::{Bundle, BundleError};
 use lemi_core::{Scene, UpAxis};
 
 use crate::import::{load_with_report, ImportReport};
-use crate::{fingerprint, LoadOptions, ProgressFn, SceneError};
+use crate::{fingerprint_with, FingerprintScheme, LoadOptions, ProgressFn, SceneError};
 
 /// A bundle and the scene it was baked from.
 #[derive(Debug)]
@@ -33,13 +33,21 @@ pub enum OpenBundleError {
         #[source]
         source: SceneError,
     },
-    /// The scene inputs are not the scene the bundle was baked from.
-    #[error("the scene {} is not the one {} was baked from", sources.join(" "), bundle.display())]
+    /// The scene inputs are not the scene the bundle was baked from (under the fingerprint
+    /// scheme the bundle was baked with, `scheme`).
+    #[error("the scene {} is not the one {} was baked from{}", sources.join(" "), bundle.display(), legacy_note(*scheme))]
     WrongScene {
         bundle: PathBuf,
         sources: Vec<String>,
+        scheme: FingerprintScheme,
         #[source]
         source: Box<BundleError>,
+    },
+    /// The bundle's scene fingerprint was made with a scheme this lemi does not know.
+    #[error("{}: the scene fingerprint `{fingerprint}` is of a scheme this lemi does not know (it knows schemes 1 and 2: bare hex and `v2:`); open the bundle with the lemi that baked it, or bake it again", bundle.display())]
+    UnknownScheme {
+        bundle: PathBuf,
+        fingerprint: String,
     },
     /// The scene has the right fingerprint but cannot be loaded.
     #[error("loading {}", sources.join(" "))]
@@ -48,6 +56,21 @@ pub enum OpenBundleError {
         #[source]
         source: SceneError,
     },
+}
+
+/// What a scene mismatch adds for a bundle fingerprinted under scheme 1, which also covered files
+/// beside the scene that it does not use.
+pub fn legacy_note(scheme: FingerprintScheme) -> &'static str {
+    match scheme {
+        FingerprintScheme::V1 => {
+            " (the bundle's fingerprint is of scheme 1, from before `v2:` fingerprints: it also \
+             covers every .bin, .mtl, .png, .jpg and .jpeg file beside a scene file, used or not, \
+             so such a file added, changed or removed there since the bake changes it too; put \
+             the directory back as it was, or bake the bundle again, which fingerprints the scene \
+             by what it references)"
+        }
+        FingerprintScheme::V2 => "",
+    }
 }
 
 /// Opens the bundle in `dir` and loads the scene it was baked from: `scene_override` if not
@@ -71,7 +94,14 @@ pub fn open_bundle(
     } else {
         scene_override.to_vec()
     };
-    let fp = match fingerprint(&sources, up) {
+    let Some(scheme) = FingerprintScheme::of(&manifest.scene.fingerprint) else {
+        return Err(OpenBundleError::UnknownScheme {
+            bundle: lemi_core::bundle::manifest_path(bundle.dir()),
+            fingerprint: manifest.scene.fingerprint.clone(),
+        });
+    };
+    // A bundle is checked under the scheme it was baked with, so older bundles keep opening.
+    let fp = match fingerprint_with(&sources, up, scheme) {
         Ok(fp) => fp,
         Err(source) => {
             return Err(OpenBundleError::Fingerprint {
@@ -85,6 +115,7 @@ pub fn open_bundle(
         return Err(OpenBundleError::WrongScene {
             bundle: bundle.dir().to_path_buf(),
             sources,
+            scheme,
             source: Box::new(source),
         });
     }

@@ -11,9 +11,9 @@ mod error;
 mod fingerprint;
 pub mod import;
 
-pub use bundle::{open_bundle, OpenBundleError, OpenedBundle};
+pub use bundle::{legacy_note, open_bundle, OpenBundleError, OpenedBundle};
 pub use error::SceneError;
-pub use fingerprint::fingerprint;
+pub use fingerprint::{fingerprint, fingerprint_with, FingerprintScheme};
 
 use std::sync::Arc;
 

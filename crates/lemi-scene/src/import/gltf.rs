@@ -13,7 +13,7 @@
 //! take `TEXCOORD_0` and `COLOR_0` (linear, stored as 8-bit linear).
 
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use base64::Engine;
 use glam::{DMat3, DMat4, DVec3};
@@ -127,7 +127,7 @@ pub(super) fn load(
 /// first checks the one reference `gltf-json`'s validation indexes without a bounds check, and
 /// that it accepts a `POSITION` accessor without `min`/`max` (required by the spec but often
 /// missing, and not used here).
-fn parse(bytes: &[u8]) -> Result<Gltf, String> {
+pub(crate) fn parse(bytes: &[u8]) -> Result<Gltf, String> {
     use gltf::json::validation::Validate;
     let gltf = Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     let root = gltf.document.as_json();
@@ -171,15 +171,12 @@ fn short(uri: &str) -> String {
     }
 }
 
-/// Reads a buffer or image URI: `data:` (base64) or a path relative to the glTF file.
-fn read_uri(dir: &Path, uri: &str) -> Result<Vec<u8>, String> {
-    if let Some(rest) = uri.strip_prefix("data:") {
-        let (_, payload) = rest
-            .split_once(";base64,")
-            .ok_or("only base64 `data:` URIs are supported")?;
-        return base64::engine::general_purpose::STANDARD
-            .decode(payload.trim())
-            .map_err(|e| format!("bad base64: {e}"));
+/// Where a buffer or image URI points: `None` for a `data:` URI (its bytes are inside the glTF
+/// file), else the file it names, relative to the glTF file's directory `dir` (percent-decoded;
+/// `../` and `file://` paths allowed). Other schemes and bad encodings are errors.
+pub(crate) fn uri_path(dir: &Path, uri: &str) -> Result<Option<PathBuf>, String> {
+    if uri.starts_with("data:") {
+        return Ok(None);
     }
     let rel = if let Some(p) = uri.strip_prefix("file://") {
         p.to_string()
@@ -191,8 +188,23 @@ fn read_uri(dir: &Path, uri: &str) -> Result<Vec<u8>, String> {
             .map_err(|e| format!("bad URI encoding: {e}"))?
             .into_owned()
     };
-    let full = dir.join(rel);
-    std::fs::read(&full).map_err(|e| format!("{}: {e}", full.display()))
+    Ok(Some(dir.join(rel)))
+}
+
+/// Reads a buffer or image URI: `data:` (base64) or a path relative to the glTF file.
+fn read_uri(dir: &Path, uri: &str) -> Result<Vec<u8>, String> {
+    match uri_path(dir, uri)? {
+        Some(full) => std::fs::read(&full).map_err(|e| format!("{}: {e}", full.display())),
+        None => {
+            let rest = uri.strip_prefix("data:").unwrap_or(uri);
+            let (_, payload) = rest
+                .split_once(";base64,")
+                .ok_or("only base64 `data:` URIs are supported")?;
+            base64::engine::general_purpose::STANDARD
+                .decode(payload.trim())
+                .map_err(|e| format!("bad base64: {e}"))
+        }
+    }
 }
 
 struct Ctx<'a> {

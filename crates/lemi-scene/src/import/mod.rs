@@ -12,8 +12,8 @@
 //! deterministic. Problems that do not stop a file from loading (a missing MTL, a missing texture,
 //! skipped point/line primitives) are collected as warnings in [`ImportReport`].
 
-mod gltf;
-mod obj;
+pub(crate) mod gltf;
+pub(crate) mod obj;
 mod ply;
 
 use std::path::{Path, PathBuf};
@@ -43,7 +43,7 @@ impl ImportReport {
 
 /// The supported file kinds, recognised by extension (case-insensitive).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kind {
+pub(crate) enum Kind {
     Gltf,
     Glb,
     Obj,
@@ -51,7 +51,7 @@ enum Kind {
     PlyGz,
 }
 
-fn kind_of(path: &Path) -> Option<Kind> {
+pub(crate) fn kind_of(path: &Path) -> Option<Kind> {
     let name = path.file_name()?.to_str()?.to_ascii_lowercase();
     if name.ends_with(".ply.gz") {
         Some(Kind::PlyGz)
@@ -123,7 +123,7 @@ fn progress(options: &LoadOptions, what: &str, done: u64, total: u64) {
 
 /// Every supported file below `dir`, recursively (symlinked directories are not followed, so
 /// cycles cannot occur).
-fn collect_dir(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), SceneError> {
+pub(crate) fn collect_dir(dir: &Path, out: &mut Vec<PathBuf>) -> Result<(), SceneError> {
     let io = |source| SceneError::Io {
         path: dir.to_path_buf(),
         source,

@@ -151,17 +151,7 @@ fn texture(
     report: &mut ImportReport,
     cache: &mut HashMap<PathBuf, Option<u32>>,
 ) -> Option<u32> {
-    // `map_Kd` may carry options before the file name (`-s 1 1 1 file.png`); try the whole
-    // value first, then its last word.
-    let mut names = vec![spec.trim().to_string()];
-    if let Some(last) = spec.split_ascii_whitespace().last() {
-        names.push(last.to_string());
-    }
-    let found = names
-        .iter()
-        .flat_map(|n| dirs.iter().map(move |d| d.join(n.replace('\\', "/"))))
-        .find(|p| p.is_file());
-    let Some(file) = found else {
+    let Some(file) = resolve_texture(spec, dirs) else {
         report.missing_textures += 1;
         report.warn(obj, format!("texture `{spec}` not found"));
         return None;
@@ -186,4 +176,40 @@ fn texture(
     };
     cache.insert(file, result);
     result
+}
+
+/// The file a texture statement of an MTL file names, if it exists: `map_Kd` (and the other maps)
+/// may carry options before the file name (`-s 1 1 1 file.png`), so the whole value is tried
+/// first, then its last word, each in `dirs` in order (the directories of the OBJ's MTL libraries,
+/// then the OBJ's). Backslashes are read as path separators.
+pub(crate) fn resolve_texture(spec: &str, dirs: &[PathBuf]) -> Option<PathBuf> {
+    let mut names = vec![spec.trim().to_string()];
+    if let Some(last) = spec.split_ascii_whitespace().last() {
+        names.push(last.to_string());
+    }
+    names
+        .iter()
+        .flat_map(|n| dirs.iter().map(move |d| d.join(n.replace('\\', "/"))))
+        .find(|p| p.is_file())
+}
+
+/// The MTL libraries an OBJ file names (`mtllib` statements), as written and resolved against the OBJ's
+/// directory `dir` as the reader resolves them (the rest of the line is one file name, as `tobj`
+/// reads it).
+pub(crate) fn mtllib_paths(obj: &[u8], dir: &Path) -> Vec<(String, PathBuf)> {
+    let mut out: Vec<(String, PathBuf)> = Vec::new();
+    for line in obj.split(|&b| b == b'\n') {
+        let line = String::from_utf8_lossy(line.strip_suffix(b"\r").unwrap_or(line));
+        if line.split_whitespace().next() != Some("mtllib") {
+            continue;
+        }
+        let name = line.split_once(' ').unwrap_or_default().1.trim();
+        if name.is_empty() {
+            continue;
+        }
+        if !out.iter().any(|(n, _)| n == name) {
+            out.push((name.to_string(), dir.join(name)));
+        }
+    }
+    out
 }
