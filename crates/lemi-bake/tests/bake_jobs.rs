@@ -490,7 +490,7 @@ fn resume_skips_identical_cells_and_rebakes_changed_ones() {
     // atomic writes leave no temporary files behind
     let leftovers: Vec<PathBuf> = walk(&bundle)
         .into_iter()
-        .filter(|p| p.to_string_lossy().contains(".tmp-"))
+        .filter(|p| p.to_string_lossy().ends_with(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }

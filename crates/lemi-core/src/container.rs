@@ -208,19 +208,25 @@ fn walk(r: &mut Reader<'_>) -> Result<(), ContainerError> {
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed and synced,
-/// then renamed over `path`. A reader sees either the old file or the complete new one, never a part.
+/// then renamed over `path` (and the directory synced, so the rename survives a crash). A reader
+/// sees either the old file or the complete new one, never a part.
+///
+/// Several writers may write the same path at once (two processes baking the same shard on shared
+/// storage, threads of one process): each writes its own temporary file, named
+/// `.<name>.<pid>.<random>.tmp` and created exclusively (`O_EXCL`, so a name taken by anyone else,
+/// e.g. a process with the same pid in another container, is never shared but retried), and the
+/// last rename wins whole.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty());
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
-    let tmp: PathBuf = match dir {
-        Some(d) => d.join(format!(".{name}.tmp-{}", std::process::id())),
-        None => PathBuf::from(format!(".{name}.tmp-{}", std::process::id())),
-    };
+    let (tmp, mut f) = create_temp(dir, &name)?;
     let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
         drop(f);
@@ -229,7 +235,43 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    result
+    result?;
+    // Best effort: not every platform or file system can sync a directory.
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+/// Creates a new temporary file for [`write_atomic`] in `dir`, with a name no other writer holds.
+fn create_temp(dir: &Path, name: &str) -> std::io::Result<(PathBuf, std::fs::File)> {
+    use std::hash::{BuildHasher, Hasher};
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let mut last_err = None;
+    for _ in 0..16 {
+        // `RandomState` is seeded from the operating system's randomness per process; the counter
+        // and the time tell apart the names of one process.
+        let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+        h.write_u64(COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed));
+        if let Ok(t) = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH) {
+            h.write_u128(t.as_nanos());
+        }
+        let tmp = dir.join(format!(
+            ".{name}.{}.{:016x}.tmp",
+            std::process::id(),
+            h.finish()
+        ));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+        {
+            Ok(f) => return Ok((tmp, f)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last_err = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    Err(last_err.unwrap_or_else(|| std::io::Error::other("no free temporary file name")))
 }
 
 #[cfg(test)]
@@ -309,9 +351,40 @@ mod tests {
         let leftovers: Vec<_> = std::fs::read_dir(&dir)
             .unwrap()
             .filter_map(|e| e.ok())
-            .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
             .collect();
         assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Many writers of one path at once (as two processes baking the same shard, or threads):
+    /// none fails, the file is one writer's bytes whole, and no temporary file is left.
+    #[test]
+    fn concurrent_atomic_writes_of_one_path_never_mix() {
+        let dir = std::env::temp_dir().join(format!("lemi-container-c-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("cell.lemicell");
+        let contents: Vec<Vec<u8>> = (0..8u8).map(|i| vec![i; 200_000 + i as usize]).collect();
+        for _ in 0..5 {
+            std::thread::scope(|s| {
+                for c in &contents {
+                    let p = &p;
+                    s.spawn(move || write_atomic(p, c).unwrap());
+                }
+            });
+            let got = std::fs::read(&p).unwrap();
+            assert!(
+                contents.contains(&got),
+                "a mix of writers: {} bytes",
+                got.len()
+            );
+        }
+        let names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, vec!["cell.lemicell".to_string()]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -40,3 +40,70 @@ pub fn assert_clean_error_all(o: &Output, needles: &[&str]) {
 pub fn assert_clean_error(o: &Output, needle: &str) {
     assert_clean_error_all(o, &[needle]);
 }
+
+/// Every file below `dir` (relative path → bytes), leaving out `shards/` (the shard records, the
+/// merge's input) and nothing else: temporary files left behind would show as differences.
+#[allow(dead_code)] // not every suite compares bundles
+pub fn bundle_files(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    fn walk(
+        root: &std::path::Path,
+        d: &std::path::Path,
+        out: &mut std::collections::BTreeMap<String, Vec<u8>>,
+    ) {
+        for e in std::fs::read_dir(d).unwrap() {
+            let p = e.unwrap().path();
+            let rel = p.strip_prefix(root).unwrap().to_string_lossy().into_owned();
+            if p.is_dir() {
+                if rel != "shards" {
+                    walk(root, &p, out);
+                }
+            } else {
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    walk(dir, dir, &mut out);
+    out
+}
+
+/// The two bundles hold the same files with the same bytes (apart from `shards/`).
+#[allow(dead_code)]
+pub fn assert_same_bundle(expected: &std::path::Path, got: &std::path::Path) {
+    let a = bundle_files(expected);
+    let b = bundle_files(got);
+    let names_a: Vec<&String> = a.keys().collect();
+    let names_b: Vec<&String> = b.keys().collect();
+    assert_eq!(
+        names_a,
+        names_b,
+        "{} and {} hold other files",
+        expected.display(),
+        got.display()
+    );
+    assert!(
+        a.contains_key("manifest.json"),
+        "no manifest in {}",
+        expected.display()
+    );
+    for (name, bytes) in &a {
+        assert!(
+            &b[name] == bytes,
+            "{name} differs between {} and {}",
+            expected.display(),
+            got.display()
+        );
+    }
+}
+
+/// Starts `lemi ARGS` without waiting (for processes that must run at the same time).
+#[allow(dead_code)]
+pub fn spawn_lemi(args: &[String]) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_lemi"))
+        .args(args)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the lemi binary starts")
+}
