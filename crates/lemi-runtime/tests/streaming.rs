@@ -10,7 +10,8 @@
 //!   complete; then it renders exactly like a one-shot upload;
 //! - a damaged cell and a cell baked with other parameters fall back to geometry with a warning
 //!   naming the file, once; the walk continues and later cells load; a manifest whose parameters
-//!   hash is wrong is refused.
+//!   hash is wrong is refused;
+//! - so do cells truncated, or replaced by another cell's file, while the walk is under way.
 //!
 //! Without an adapter the tests fail with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
 
@@ -763,4 +764,103 @@ fn the_loader_prioritises_deduplicates_and_reports_errors_as_values() {
         "{:?}",
         t.elapsed()
     );
+}
+
+/// Cell files damaged while the walk is under way (after the streamer started and before the
+/// cells were requested): one truncated to half, one replaced by another cell's (valid) file.
+/// Each falls back to geometry with one warning naming it; the walk goes on and the intact cells
+/// between them still show.
+#[test]
+fn cells_truncated_or_replaced_during_the_walk_fall_back_once() {
+    let _serial = serial();
+    let Some(fx) = fixture() else { return };
+    let Some(s) = setup(fx) else { return };
+    let dir = copy_bundle(&fx.bundle);
+    let bundle = dir.path();
+    let want = expected(&fx.bundle);
+    let options = StreamerOptions {
+        horizon_seconds: 1.0,
+        stall_policy: StallPolicy::Block,
+        ..Default::default()
+    };
+    let mut st = streamer(&s, bundle, options);
+    let dt = 1.0 / 30.0;
+    let path = walk(&[-24.0, 24.0], 10.0, dt);
+    let mut warnings = st
+        .preload(path[0].0, path[0].1, Duration::from_secs(60))
+        .expect("preload");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let mut damaged = false;
+    let mut shown: HashMap<String, usize> = HashMap::new();
+    let mut fell_back: HashMap<String, String> = HashMap::new();
+    let start = Instant::now();
+    for (i, &(p, v)) in path.iter().enumerate() {
+        pace(start, i, dt);
+        let f = st.frame(p, v, dt);
+        check_ready(&f, p, &want);
+        warnings.extend(f.warnings.iter().cloned());
+        let cell = f.current_cell.expect("inside the row").to_string();
+        match (&f.ready, &f.fallback) {
+            (Some(_), None) => *shown.entry(cell.clone()).or_default() += 1,
+            (None, Some(reason)) => {
+                fell_back.insert(cell.clone(), reason.clone());
+            }
+            (ready, fallback) => panic!(
+                "frame {}: ready {} with fallback {fallback:?}",
+                f.frame,
+                ready.is_some()
+            ),
+        }
+        if !damaged && cell == "1_0_0" {
+            // the walk is under way and the far cells have not been asked for yet
+            let cached: Vec<String> = st
+                .cached_cells()
+                .iter()
+                .map(|(id, _)| id.to_string())
+                .collect();
+            assert!(
+                !cached.iter().any(|c| c == "3_0_0" || c == "4_0_0"),
+                "{cached:?}"
+            );
+            let four = bundle.join(cell_file_name(id("4_0_0")));
+            let bytes = std::fs::read(&four).expect("read");
+            std::fs::write(&four, &bytes[..bytes.len() / 2]).expect("truncate");
+            std::fs::copy(
+                bundle.join(cell_file_name(id("2_0_0"))),
+                bundle.join(cell_file_name(id("3_0_0"))),
+            )
+            .expect("replace");
+            damaged = true;
+        }
+    }
+    assert!(damaged, "the walk passed through 1_0_0");
+    eprintln!("warnings: {warnings:#?}");
+    assert_eq!(
+        fell_back
+            .keys()
+            .map(String::as_str)
+            .collect::<std::collections::BTreeSet<_>>(),
+        ["3_0_0", "4_0_0"].into_iter().collect(),
+        "{fell_back:?}"
+    );
+    assert_eq!(
+        warnings.len(),
+        2,
+        "one warning per damaged cell: {warnings:?}"
+    );
+    assert!(
+        fell_back["4_0_0"].contains("4_0_0.lemicell"),
+        "{fell_back:?}"
+    );
+    assert!(
+        fell_back["3_0_0"].contains("3_0_0.lemicell"),
+        "{fell_back:?}"
+    );
+    for w in &warnings {
+        assert!(w.contains(".lemicell") && w.contains("geometry"), "{w}");
+    }
+    for id in ["0_0_0", "1_0_0", "2_0_0"] {
+        assert!(shown.get(id).copied().unwrap_or(0) > 0, "{id}: {shown:?}");
+    }
+    assert_eq!(st.stats().failures, 2);
 }
