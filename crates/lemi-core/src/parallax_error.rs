@@ -14,6 +14,12 @@
 //! Pixels that are not impostor texels (near geometry, background), whose texel has no recorded
 //! depth, or whose true point is behind the eye get NaN.
 //!
+//! The runtime draws every quad grown by a thin rim (a fraction of a texel) that shows the quad's
+//! edge texels; a pixel on such a rim lies geometrically in the neighbouring texel, which may be
+//! transparent in that layer. Such a pixel is attributed to the texel the rim shows: the
+//! neighbour with a depth of its own in the same layer whose grown square contains the point
+//! (`rim_texels` of [`pixel_errors`]), before any fallback to the closer layer.
+//!
 //! A texel filled by gap filling (GI 2002 sec. 5.1) has no depth of its own: it was copied from the
 //! next closer layer, so that layer's depth is used, and the pixel is flagged. Such a texel shows a
 //! point of the closer slab drawn one layer too far (that is what closes the gap), so its error is
@@ -48,6 +54,10 @@ pub struct LayerTexel {
     pub j: u32,
     /// The point's depth along the face axis (≈ the layer distance).
     pub depth: f64,
+    /// The point's position in the face image in texel units (`i ≤ u < i + 1`, `j ≤ v < j + 1`
+    /// inside the image).
+    pub u: f64,
+    pub v: f64,
 }
 
 impl LayerDepths {
@@ -70,8 +80,9 @@ impl LayerDepths {
                 let off = (d - dk).abs() / dk;
                 if off <= tolerance && best.as_ref().is_none_or(|(b, _)| off < *b) {
                     let r = self.res as f64;
-                    let i = (((s + 1.0) * 0.5 * r).floor() as i64).clamp(0, self.res as i64 - 1);
-                    let j = (((t + 1.0) * 0.5 * r).floor() as i64).clamp(0, self.res as i64 - 1);
+                    let (u, v) = ((s + 1.0) * 0.5 * r, (t + 1.0) * 0.5 * r);
+                    let i = (u.floor() as i64).clamp(0, self.res as i64 - 1);
+                    let j = (v.floor() as i64).clamp(0, self.res as i64 - 1);
                     best = Some((
                         off,
                         LayerTexel {
@@ -80,12 +91,61 @@ impl LayerDepths {
                             i: i as u32,
                             j: j as u32,
                             depth: d,
+                            u,
+                            v,
                         },
                     ));
                 }
             }
         }
         best.map(|(_, t)| t)
+    }
+
+    /// The texel a quad drawn grown by `rim` texels shows at `t`'s point: `t` itself when it
+    /// recorded a depth in its layer, else the 8-neighbour with a depth of its own whose square
+    /// grown by `rim` contains the point (the nearest one), else `t`.
+    pub fn displayed_texel(&self, t: &LayerTexel, rim: f64) -> LayerTexel {
+        let Some(depths) = self
+            .depth
+            .get(t.face_slot)
+            .and_then(|layers| layers.get(t.layer))
+        else {
+            return *t;
+        };
+        let res = self.res as i64;
+        let has_depth = |i: i64, j: i64| {
+            (0..res).contains(&i)
+                && (0..res).contains(&j)
+                && depths
+                    .get((j * res + i) as usize)
+                    .is_some_and(|d| d.is_finite())
+        };
+        if has_depth(t.i as i64, t.j as i64) || rim <= 0.0 {
+            return *t;
+        }
+        let mut best: Option<(f64, i64, i64)> = None;
+        for dj in -1..=1 {
+            for di in -1..=1 {
+                let (i, j) = (t.i as i64 + di, t.j as i64 + dj);
+                if (di, dj) == (0, 0) || !has_depth(i, j) {
+                    continue;
+                }
+                // distance from the point to the neighbour's square, per axis
+                let off = |p: f64, lo: i64| (lo as f64 - p).max(p - (lo + 1) as f64).max(0.0);
+                let d = off(t.u, i).max(off(t.v, j));
+                if d <= rim && best.is_none_or(|(b, _, _)| d < b) {
+                    best = Some((d, i, j));
+                }
+            }
+        }
+        match best {
+            Some((_, i, j)) => LayerTexel {
+                i: i as u32,
+                j: j as u32,
+                ..*t
+            },
+            None => *t,
+        }
     }
 
     /// The recorded depth of a texel, or that of the next closer layer (a gap-filled texel), and
@@ -120,12 +180,13 @@ pub struct ParallaxErrors {
 /// The geometric error of every pixel of an impostor image with view depths `depth` rendered from
 /// `view` (see the module docs). `tolerance`: how close to a layer plane (relative to its distance)
 /// a pixel's point must be to count as that layer's; the impostor renderer's depth is f32, so
-/// about `1e-4` is right.
+/// about `1e-4` is right. `rim_texels`: how far the renderer grows every quad beyond its texels.
 pub fn pixel_errors(
     view: &View,
     depth: &[f32],
     layers: &LayerDepths,
     tolerance: f64,
+    rim_texels: f64,
 ) -> ParallaxErrors {
     let (w, h) = (view.width as usize, view.height as usize);
     let mut out = ParallaxErrors {
@@ -150,6 +211,7 @@ pub fn pixel_errors(
         let Some(texel) = layers.texel_of(x, tolerance) else {
             continue;
         };
+        let texel = layers.displayed_texel(&texel, rim_texels);
         out.impostor_pixels += 1;
         let Some((d, from_closer)) = layers.recorded_depth(&texel) else {
             out.without_depth += 1;
@@ -199,12 +261,24 @@ mod tests {
     fn no_error_from_the_reference_viewpoint_or_for_a_point_on_the_layer() {
         let cam = Camera::new(DVec3::ZERO, DVec3::Z, DVec3::Y, 60.0, 64, 48).unwrap();
         let v = cam.view();
-        let e = pixel_errors(&v, &plane_depth(&v, 100.0), &flat(32, 100.0, 60.0), 1e-4);
+        let e = pixel_errors(
+            &v,
+            &plane_depth(&v, 100.0),
+            &flat(32, 100.0, 60.0),
+            1e-4,
+            0.0,
+        );
         assert_eq!(e.impostor_pixels, 64 * 48);
         assert!(e.error_px.iter().all(|&x| x < 1e-3), "from the centre");
         let cam = Camera::new(DVec3::new(2.0, 1.0, 0.0), DVec3::Z, DVec3::Y, 60.0, 64, 48).unwrap();
         let v = cam.view();
-        let e = pixel_errors(&v, &plane_depth(&v, 100.0), &flat(32, 100.0, 100.0), 1e-4);
+        let e = pixel_errors(
+            &v,
+            &plane_depth(&v, 100.0),
+            &flat(32, 100.0, 100.0),
+            1e-4,
+            0.0,
+        );
         assert!(e.error_px.iter().all(|&x| x < 1e-3), "surface on the layer");
     }
 
@@ -224,6 +298,7 @@ mod tests {
             &plane_depth(&v, big_d),
             &flat(64, big_d, d as f32),
             1e-4,
+            0.0,
         );
         let vals: Vec<f32> = r.error_px.iter().copied().filter(|x| !x.is_nan()).collect();
         assert_eq!(vals.len(), (w * h) as usize);
@@ -246,6 +321,7 @@ mod tests {
             &plane_depth(&v, big_d),
             &flat(64, big_d, d as f32),
             1e-4,
+            0.0,
         );
         assert!(r.error_px.iter().all(|&x| (x - 2.0).abs() < 4e-3));
     }
@@ -260,7 +336,7 @@ mod tests {
         let mut layers = flat(4, 100.0, 60.0);
         // texel (0, 0) of the layer recorded nothing: pixel (7, 7) of this view lies in texel (3, 3)
         layers.depth[0][0][3 * 4 + 3] = f32::INFINITY;
-        let r = pixel_errors(&v, &z, &layers, 1e-4);
+        let r = pixel_errors(&v, &z, &layers, 1e-4, 0.0);
         assert!(r.error_px[0].is_nan() && r.error_px[1].is_nan());
         assert_eq!(r.impostor_pixels, 62);
         assert!(r.without_depth > 0);
@@ -278,9 +354,42 @@ mod tests {
             i: 1,
             j: 1,
             depth: 100.0,
+            u: 1.5,
+            v: 1.5,
         };
         assert_eq!(l.recorded_depth(&t), Some((40.0, true)));
         let t = LayerTexel { i: 2, ..t };
         assert_eq!(l.recorded_depth(&t), Some((60.0, false)));
+    }
+
+    /// A point on the rim of a quad, just inside a texel that is transparent in its layer, shows
+    /// the quad's edge texel: it is measured with that texel's depth, not the closer layer's.
+    #[test]
+    fn rim_pixels_are_attributed_to_the_texel_the_rim_shows() {
+        let mut l = flat(4, 100.0, 60.0);
+        l.distances[0] = vec![100.0, 50.0];
+        l.depth[0].push(vec![40.0; 16]);
+        // texel (2, 1) of the far layer is transparent; (1, 1) recorded 60 m
+        l.depth[0][0][4 + 2] = f32::INFINITY;
+        let t = LayerTexel {
+            face_slot: 0,
+            layer: 0,
+            i: 2,
+            j: 1,
+            depth: 100.0,
+            u: 2.03,
+            v: 1.5,
+        };
+        let shown = l.displayed_texel(&t, 1.0 / 16.0);
+        assert_eq!((shown.i, shown.j), (1, 1));
+        assert_eq!(l.recorded_depth(&shown), Some((60.0, false)));
+        // farther inside the transparent texel than the rim: a gap-filled texel of the closer layer
+        let deep = LayerTexel { u: 2.3, ..t };
+        let shown = l.displayed_texel(&deep, 1.0 / 16.0);
+        assert_eq!((shown.i, shown.j), (2, 1));
+        assert_eq!(l.recorded_depth(&shown), Some((40.0, true)));
+        // a texel with a depth of its own is itself
+        let own = LayerTexel { i: 1, u: 1.97, ..t };
+        assert_eq!(l.displayed_texel(&own, 1.0 / 16.0), own);
     }
 }

@@ -195,7 +195,13 @@ impl CellRenderer for LayeredCells<'_> {
             .renderer
             .render(gpu_cell, view, &self.render_options)
             .map_err(|e| err(format!("impostor render: {e}")))?;
-        let geometric = pixel_errors(view, &frame.depth, depths, 1e-4);
+        let geometric = pixel_errors(
+            view,
+            &frame.depth,
+            depths,
+            1e-4,
+            lemi_gpu::impostor::QUAD_GROWTH_TEXELS,
+        );
         Ok(RenderedView {
             frame,
             error_px: geometric.error_px,
