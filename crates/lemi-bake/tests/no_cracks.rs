@@ -1669,9 +1669,9 @@ fn gap_filled_texels_are_displayed_within_alpha() {
     );
 }
 
-/// The clip-edge gap rule (`GapSources::FarClipEdges`) keeps the three crack scenes crack-free:
-/// the paper's copies of silhouettes and its overwrites are not what closes the gaps between
-/// layers; the conservative recording of the cuts in both layers is.
+/// The clip-edge gap rule (`GapSources::FarClipEdges`, named here whatever the default) keeps the
+/// three crack scenes crack-free: the paper's copies of silhouettes and its overwrites are not
+/// what closes the gaps between layers; the conservative recording of the cuts in both layers is.
 #[test]
 fn the_clip_edge_gap_rule_opens_no_crack() {
     let Some(gpu) = gpu() else { return };

@@ -69,7 +69,9 @@ pub enum Coverage {
     /// growing by up to a texel. Edges shared by two triangles of a slab stay watertight: a texel
     /// centre on the shared edge counts as inside both. Not yet what the bake records with: on the
     /// crack test's terrain it leaves a few background pixels where a far surface crosses the
-    /// seam of two faces, which full conservative coverage closes.
+    /// seam of two faces, and on a `builtin:city:1M` cell the certificate counts one-pixel strips
+    /// along building edges in every view (39,333 crack pixels in 104 views): a silhouette that
+    /// is no longer grown is uncovered by the parallax the placement allows.
     ClipEdges,
 }
 

@@ -81,7 +81,7 @@ pub struct CompressOptions {
     /// (Schaufler's layered impostors, `Layering::Equidistant`): the layers then go to hidden-texel
     /// removal as recorded and [`CompressStats::gap_fill`] stays zero.
     pub gap_fill: bool,
-    /// Which texels gap filling copies (default: the paper's rule).
+    /// Which texels gap filling copies (default: the clip-edge texels of the far border).
     pub gap_sources: GapSources,
     pub hidden: HiddenTexelOptions,
     pub micro: MicroTextureOptions,
