@@ -62,9 +62,11 @@ struct FragmentOut {
     @builtin(frag_depth) z: f32,
 };
 
-// Half a texel in framebuffer pixels, grown by a hair so that squares merely touching the triangle
-// count as covered despite rounding.
-const HALF: f32 = 0.5005;
+// Half a texel in framebuffer pixels, grown by 1/128 px so that squares merely touching the
+// triangle count as covered despite f32 rounding: the clip-border texels are found in f64
+// (`lemi_core::clip_border`), and a cut that grazes a texel by 0.0006 px (found on a city cell)
+// must still be covered in both layers, or gap filling has to copy it one layer back.
+const HALF: f32 = 0.5078125;
 // Slack of the clip-edge mode's centre test (px): more than the rasterizer's vertex snapping.
 const TIE: f32 = 1.0 / 64.0;
 
