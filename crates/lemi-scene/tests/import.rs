@@ -402,6 +402,97 @@ fn truncated_and_garbage_files_give_errors_naming_the_file() {
     }
 }
 
+/// A sparse accessor without a buffer view is zeros sized by its `count` alone: a few bytes of
+/// JSON asking for 80 M positions (1.9 GB as `f64`, 2.9 GB as vertices) are an error, not an
+/// allocation (found by reading the reader for the fuzz targets; the same file is
+/// `fuzz/regressions/gltf/sparse_without_view_huge_count.gltf`).
+#[test]
+fn a_sparse_accessor_without_a_view_cannot_ask_for_gigabytes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let json = |count: u64| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+"buffers":[{{"uri":"data:application/octet-stream;base64,AAAAAAAAgD8AAAAAAAAAAA==","byteLength":16}}],
+"bufferViews":[{{"buffer":0,"byteLength":4}},{{"buffer":0,"byteOffset":4,"byteLength":12}}],
+"accessors":[{{"componentType":5126,"count":{count},"type":"VEC3",
+"sparse":{{"count":1,"indices":{{"bufferView":0,"componentType":5125}},"values":{{"bufferView":1}}}}}}]}}"#
+        )
+    };
+    let huge = dir.path().join("huge.gltf");
+    write(&huge, json(80_000_000).as_bytes());
+    let msg = load_path(&huge, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        msg.contains("huge.gltf") && msg.contains("without a buffer view has 80000000 elements"),
+        "{msg}"
+    );
+    // A small one still reads: 3 vertices, the sparse value lands on vertex 0 (a degenerate
+    // triangle, dropped, so the scene is empty: the error says so, not the accessor).
+    let small = dir.path().join("small.gltf");
+    write(&small, json(3).as_bytes());
+    let msg = load_path(&small, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(!msg.contains("buffer view"), "{msg}");
+}
+
+/// References come from a file's bytes: a glTF buffer or image URI, or an OBJ `mtllib`, naming a
+/// device (`/dev/zero`) is an error or a warning, never an endless read (found by reading the
+/// readers for the fuzz targets: the fuzzers' scratch directory sits next to `/dev` by `../`).
+#[cfg(unix)]
+#[test]
+fn references_to_devices_are_not_read() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let gltf = dir.path().join("zero.gltf");
+    write(
+        &gltf,
+        br#"{"asset":{"version":"2.0"},"buffers":[{"uri":"/dev/zero","byteLength":16}]}"#,
+    );
+    let msg = load_path(&gltf, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        msg.contains("/dev/zero") && msg.contains("not a regular file"),
+        "{msg}"
+    );
+
+    let obj = dir.path().join("zero.obj");
+    write(
+        &obj,
+        b"mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    );
+    let (s, r) = ok(&obj);
+    assert_eq!(s.triangle_count(), 1);
+    assert_eq!(r.missing_materials, 1, "{:?}", r.warnings);
+}
+
+/// A GLB whose header declares a total length below its own 12 bytes is an error naming the file
+/// (the `gltf` crate's subtraction overflowed on it; found by AFL++ on the `gltf` target, the input
+/// is `fuzz/regressions/gltf/glb_length_shorter_than_header.glb`).
+#[test]
+fn a_glb_length_shorter_than_its_header_is_an_error() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("short.glb");
+    let mut bytes = b"glTF".to_vec();
+    bytes.extend(2u32.to_le_bytes());
+    bytes.extend(5u32.to_le_bytes());
+    bytes.extend([0u8; 20]);
+    write(&path, &bytes);
+    let msg = load_path(&path, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        msg.contains("short.glb") && msg.contains("total length 5 is shorter"),
+        "{msg}"
+    );
+}
+
 fn skip_if_absent(path: &Path) -> bool {
     lemi_testkit::require_file(
         path,

@@ -22,7 +22,7 @@ use gltf::mesh::Mode;
 use gltf::{Gltf, Semantic};
 use lemi_core::{Material, Mesh, SceneBuilder, Vertex};
 
-use super::{decode_texture, malformed, read_file, ImportReport};
+use super::{decode_texture, malformed, read_file, read_referenced, ImportReport};
 use crate::{LoadOptions, SceneError};
 
 pub(super) fn load(
@@ -129,6 +129,18 @@ pub(super) fn load(
 /// missing, and not used here).
 pub(crate) fn parse(bytes: &[u8]) -> Result<Gltf, String> {
     use gltf::json::validation::Validate;
+    // `gltf` 1.4 subtracts the 12-byte header from a GLB's declared length unchecked (an overflow
+    // panic in builds with overflow checks): a length shorter than the header is refused here.
+    if let Some(len) = bytes
+        .strip_prefix(b"glTF")
+        .and_then(|rest| rest.get(4..8))
+        .map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]))
+        .filter(|&l| l < 12)
+    {
+        return Err(format!(
+            "GLB header: total length {len} is shorter than the 12-byte header"
+        ));
+    }
     let gltf = Gltf::from_slice_without_validation(bytes).map_err(|e| e.to_string())?;
     let root = gltf.document.as_json();
     for (mi, m) in root.meshes.iter().enumerate() {
@@ -194,7 +206,7 @@ pub(crate) fn uri_path(dir: &Path, uri: &str) -> Result<Option<PathBuf>, String>
 /// Reads a buffer or image URI: `data:` (base64) or a path relative to the glTF file.
 fn read_uri(dir: &Path, uri: &str) -> Result<Vec<u8>, String> {
     match uri_path(dir, uri)? {
-        Some(full) => std::fs::read(&full).map_err(|e| format!("{}: {e}", full.display())),
+        Some(full) => read_referenced(&full).map_err(|e| format!("{}: {e}", full.display())),
         None => {
             let rest = uri.strip_prefix("data:").unwrap_or(uri);
             let (_, payload) = rest
@@ -561,6 +573,11 @@ fn view_range(
     Ok((b, view.offset(), end))
 }
 
+/// The most components a sparse accessor without a buffer view may have (16 Mi, 128 MiB as
+/// `f64`): its elements are zeros that no byte of the file backs, so its `count` is the only thing
+/// sizing them, and a few bytes of JSON must not ask for gigabytes.
+const MAX_VIEWLESS_COMPONENTS: usize = 1 << 24;
+
 /// Reads an accessor (dense and sparse parts) into `f64`s; with `normalize_ints`, integer
 /// components are mapped to 0..1 / −1..1 (as `TEXCOORD_n` and `COLOR_n` require), otherwise only
 /// when the accessor says `normalized`.
@@ -601,10 +618,19 @@ fn read_accessor(
             )?;
         }
         None => {
-            let total = count.checked_mul(dims).ok_or("accessor too large")?;
-            if acc.sparse().is_none() || total > (1 << 28) {
+            if acc.sparse().is_none() {
                 return Err("accessor has no buffer view".into());
             }
+            // Zeros that no byte of the file backs: `count` alone would size the allocation.
+            let total = count
+                .checked_mul(dims)
+                .filter(|&t| t <= MAX_VIEWLESS_COMPONENTS)
+                .ok_or_else(|| {
+                    format!(
+                        "sparse accessor without a buffer view has {count} elements; lemi reads \
+                         at most {MAX_VIEWLESS_COMPONENTS} components without one"
+                    )
+                })?;
             data = vec![0.0; total];
         }
     }

@@ -188,6 +188,19 @@ pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, SceneError> {
     })
 }
 
+/// Reads a file that another file references (a glTF buffer or image, an OBJ's MTL library). Only
+/// a regular file is read: the reference comes from the file's bytes, and a device or a pipe
+/// (`/dev/zero`, `/dev/stdin`) would be an endless read or a hang rather than an error.
+pub(crate) fn read_referenced(path: &Path) -> std::io::Result<Vec<u8>> {
+    if !std::fs::metadata(path)?.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file",
+        ));
+    }
+    std::fs::read(path)
+}
+
 pub(crate) fn malformed(path: &Path, message: impl Into<String>) -> SceneError {
     SceneError::Malformed {
         path: path.to_path_buf(),

@@ -39,7 +39,12 @@ pub(super) fn load(
             if let Ok(mut d) = mtl_dirs.lock() {
                 d.push(full.parent().map(Path::to_path_buf).unwrap_or_default());
             }
-            let r = tobj::load_mtl(&full);
+            // Only a regular file: `mtllib /dev/zero` must not be an endless read.
+            let r = if full.is_file() {
+                tobj::load_mtl(&full)
+            } else {
+                Err(tobj::LoadError::OpenFileFailed)
+            };
             if let (Err(e), Ok(mut errs)) = (&r, mtl_errors.lock()) {
                 errs.push(format!("material library {}: {e}", full.display()));
             }
