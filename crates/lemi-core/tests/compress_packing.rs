@@ -3,14 +3,17 @@
 //! copied, rotated ones included).
 
 use lemi_core::compress::{
-    analyze_packing, pack_micro_textures, pack_rects, MacroPlacement, MicroTexture, Packing,
-    PackingOptions, TexelRect,
+    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, MacroPlacement,
+    MicroTexture, Packing, PackingOptions, TexelRect,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
 
 fn opts(max_size: u32) -> PackingOptions {
-    PackingOptions { max_size }
+    PackingOptions {
+        max_size,
+        ..Default::default()
+    }
 }
 
 fn at(macro_index: u32, x: u32, y: u32, rotated: bool) -> MacroPlacement {
@@ -285,5 +288,75 @@ proptest! {
     ) {
         let max = 1 << max_log;
         prop_assert_eq!(pack_rects(&sizes, &opts(max)).unwrap(), brute_pack(&sizes, max));
+    }
+}
+
+fn block_opts(max_size: u32) -> PackingOptions {
+    PackingOptions { max_size, block: 4 }
+}
+
+#[test]
+fn without_block_alignment_small_micro_textures_share_blocks() {
+    // the control of the property below: 1×1 and 3×2 micro-textures packed tightly share 4×4 blocks
+    let sizes = [(1, 1), (3, 2), (1, 1), (2, 3)];
+    let p = pack_rects(&sizes, &opts(64)).unwrap();
+    assert!(analyze_block_sharing(&sizes, &p, 4).shared_blocks > 0);
+    let p = pack_rects(&sizes, &block_opts(64)).unwrap();
+    let s = analyze_block_sharing(&sizes, &p, 4);
+    assert_eq!((s.used_blocks, s.shared_blocks), (4, 0));
+    assert!(pack_rects(
+        &sizes,
+        &PackingOptions {
+            max_size: 64,
+            block: 3
+        }
+    )
+    .is_err());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+    #[test]
+    fn block_aligned_packing_never_shares_a_block_and_keeps_every_texel(
+        sizes in prop::collection::vec((1u32..=40, 1u32..=40), 1..80),
+        max_log in 6u32..9,
+        seed in any::<u64>(),
+    ) {
+        let max = 1 << max_log;
+        let micros: Vec<MicroTexture> = sizes.iter().enumerate()
+            .map(|(i, &(w, h))| micro(w, h, seed.wrapping_add(i as u64)))
+            .collect();
+        let (macros, placements, stats) = pack_micro_textures(&micros, &block_opts(max)).unwrap();
+        let packing = Packing {
+            macro_sizes: macros.iter().map(|m| (m.width, m.height)).collect(),
+            placements: placements.clone(),
+        };
+        prop_assert_eq!(analyze_packing(&sizes, &packing).unwrap(), stats);
+        prop_assert_eq!(analyze_block_sharing(&sizes, &packing, 4).shared_blocks, 0);
+        for m in &macros {
+            prop_assert!(m.width % 4 == 0 && m.height % 4 == 0);
+        }
+        for (mt, p) in micros.iter().zip(&placements) {
+            let (w, h) = (mt.rect.width(), mt.rect.height());
+            prop_assert!(p.x % 4 == 0 && p.y % 4 == 0);
+            prop_assert_eq!(p.rotated, w > h);
+            // the quad's own texels, exactly where its corners say
+            let mac = &macros[p.macro_index as usize];
+            let c = p.macro_corners(w, h);
+            let (fw, fh) = p.footprint(w, h);
+            let (xs, ys) = ([c[0][0], c[1][0], c[2][0], c[3][0]], [c[0][1], c[1][1], c[2][1], c[3][1]]);
+            prop_assert_eq!((*xs.iter().min().unwrap(), *xs.iter().max().unwrap()), (p.x, p.x + fw));
+            prop_assert_eq!((*ys.iter().min().unwrap(), *ys.iter().max().unwrap()), (p.y, p.y + fh));
+            for y in 0..h {
+                for x in 0..w {
+                    let (mx, my) = p.macro_texel(w, h, x, y);
+                    let d = 4 * (my * mac.width + mx) as usize;
+                    let s = 4 * (y * w + x) as usize;
+                    prop_assert_eq!(&mac.rgba[d..d + 4], &mt.pixels[s..s + 4]);
+                }
+            }
+        }
+        let used: u64 = macros.iter().map(|m| m.rgba.chunks_exact(4).filter(|p| p[3] != 0).count() as u64).sum();
+        prop_assert_eq!(used, stats.micro_texels);
     }
 }

@@ -19,6 +19,13 @@
 //! A rotated micro-texture is turned 90° clockwise: its texel `(x, y)` of a `w × h` micro-texture
 //! lands at `(px + h − 1 − y, py + x)`; see [`MacroPlacement::macro_texel`] and
 //! [`MacroPlacement::macro_corners`].
+//!
+//! For a block-compressed format (`PackingOptions::block` = 4: BC7, BC1, KDFS secs. 21–22 encode
+//! 4×4 texel blocks independently) every rectangle is packed with its size rounded up to a
+//! multiple of the block side. All sizes, and the power-of-two macro sides (≥ 4), are then
+//! multiples of it, so every corner of a maximal free rectangle and every position is too: each
+//! micro-texture owns the whole blocks of its padded footprint, no block mixes two, and its own
+//! texels keep their exact rectangle at the footprint's top-left. [`analyze_block_sharing`] checks it.
 
 use rayon::prelude::*;
 
@@ -30,11 +37,17 @@ use super::CompressError;
 pub struct PackingOptions {
     /// Largest macro-texture side (a power of two; GPUs guarantee 2048 on downlevel, 8192 usually).
     pub max_size: u32,
+    /// Side of the texel blocks the macro-textures are encoded in: 1 (PNG, no alignment) or a
+    /// power of two such as 4 (BC7, BC1): footprints are padded to, and placed on, multiples of it.
+    pub block: u32,
 }
 
 impl Default for PackingOptions {
     fn default() -> Self {
-        PackingOptions { max_size: 4096 }
+        PackingOptions {
+            max_size: 4096,
+            block: 1,
+        }
     }
 }
 
@@ -233,6 +246,14 @@ pub fn pack_rects(
             reason: format!("{max} is not a power of two"),
         });
     }
+    let block = options.block;
+    if block == 0 || !block.is_power_of_two() || block > max {
+        return Err(CompressError::BadOption {
+            option: "macro-texture block size",
+            reason: format!("{block} is not a power of two of at most the max size {max}"),
+        });
+    }
+    let pad = |v: u32| v.div_ceil(block) * block;
     // (index, w, h, rotated) with h >= w after rotation
     let mut items: Vec<(usize, u32, u32, bool)> = Vec::with_capacity(sizes.len());
     for (i, &(w, h)) in sizes.iter().enumerate() {
@@ -241,7 +262,10 @@ pub fn pack_rects(
                 "micro-texture {i} of {w}×{h} texels cannot be packed into macro-textures of at most {max}²"
             )));
         }
-        items.push(if w > h {
+        // turned by the unpadded size, so a footprint stays top-down inside its padded one
+        let rotated = w > h;
+        let (w, h) = (pad(w), pad(h));
+        items.push(if rotated {
             (i, h, w, true)
         } else {
             (i, w, h, false)
@@ -405,6 +429,46 @@ pub fn analyze_packing(
     })
 }
 
+/// What [`analyze_block_sharing`] measures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BlockSharingStats {
+    /// Blocks holding texels of some micro-texture's footprint.
+    pub used_blocks: u64,
+    /// Of those, blocks holding texels of two or more footprints (0 for a block-aligned packing).
+    pub shared_blocks: u64,
+}
+
+/// Counts the `block × block` texel blocks of the macro-textures that hold footprint texels of two
+/// or more rectangles (`sizes`, unpadded). A packing made with `PackingOptions::block` = `block`
+/// shares none.
+pub fn analyze_block_sharing(
+    sizes: &[(u32, u32)],
+    packing: &Packing,
+    block: u32,
+) -> BlockSharingStats {
+    use std::collections::HashMap;
+    let block = block.max(1);
+    let mut owner: HashMap<(u32, u32, u32), (usize, bool)> = HashMap::new();
+    for (i, (p, &(w, h))) in packing.placements.iter().zip(sizes).enumerate() {
+        let (fw, fh) = p.footprint(w, h);
+        if fw == 0 || fh == 0 {
+            continue;
+        }
+        for by in p.y / block..=(p.y + fh - 1) / block {
+            for bx in p.x / block..=(p.x + fw - 1) / block {
+                let e = owner.entry((p.macro_index, bx, by)).or_insert((i, false));
+                if e.0 != i {
+                    e.1 = true;
+                }
+            }
+        }
+    }
+    BlockSharingStats {
+        used_blocks: owner.len() as u64,
+        shared_blocks: owner.values().filter(|(_, shared)| *shared).count() as u64,
+    }
+}
+
 /// Packs micro-textures (GI 2002 sec. 5.4) and copies their pixels into the macro-textures.
 /// Returns the macro-textures, one placement per micro-texture (input order) and the statistics.
 pub fn pack_micro_textures(
@@ -426,6 +490,15 @@ pub fn pack_micro_textures(
         .collect();
     let packing = pack_rects(&sizes, options)?;
     let stats = analyze_packing(&sizes, &packing)?;
+    if options.block > 1 {
+        let sharing = analyze_block_sharing(&sizes, &packing, options.block);
+        if sharing.shared_blocks > 0 {
+            return Err(CompressError::Invalid(format!(
+                "{} of {} texel blocks of {}² hold two micro-textures",
+                sharing.shared_blocks, sharing.used_blocks, options.block
+            )));
+        }
+    }
     let mut by_macro: Vec<Vec<usize>> = vec![Vec::new(); packing.macro_sizes.len()];
     for (i, p) in packing.placements.iter().enumerate() {
         by_macro[p.macro_index as usize].push(i);

@@ -8,27 +8,37 @@
 //! | hidden-texel removal | [`hidden_texels`] | sec. 5.2 |
 //! | micro-textures (impostor quads) | [`micro_textures`] | sec. 5.3 |
 //! | macro-texture packing | [`macro_packing`] | sec. 5.4 |
+//! | GPU block formats (BC7, BC1) | [`block_compression`] | KDFS 1.3 secs. 21–22 |
+//! | KTX2 container | [`ktx2_container`] | KTX 2.0 |
 //!
-//! PNG storage of the macro-textures (end of sec. 5.4) belongs to the bundle writer.
+//! PNG storage of the macro-textures (end of sec. 5.4) belongs to the bundle writer, as does the
+//! choice between PNG and a block format in KTX2.
 //! [`compress_cell`] runs the stages in order for one view cell, in parallel over faces and layers
 //! (deterministic: the result does not depend on the thread count). See `docs/COMPRESSION.md`.
 
+pub mod block_compression;
 pub mod gap_fill;
 pub mod hidden_texels;
+pub mod ktx2_container;
 pub mod layer_image;
 pub mod macro_packing;
 pub mod micro_textures;
 
 use rayon::prelude::*;
 
+pub use block_compression::{
+    analyze_blocks, decode_blocks, encode_blocks, BlockEncodeStats, BlockFormat, BlockQuality,
+    TextureFormat,
+};
 pub use gap_fill::{
     close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
 };
 pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
+pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
-    analyze_packing, pack_micro_textures, pack_rects, MacroPlacement, MacroTexture, Packing,
-    PackingOptions, PackingStats,
+    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, BlockSharingStats,
+    MacroPlacement, MacroTexture, Packing, PackingOptions, PackingStats,
 };
 pub use micro_textures::{
     analyze_micro_textures, extract_micro_textures, quad_corners, MicroTexture,
