@@ -31,7 +31,10 @@ use lemi_core::bundle::{
 };
 use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
-use lemi_core::compress::{compress_cell, CompressOptions, MicroTextureOptions};
+use lemi_core::compress::{
+    compress_cell, encode_blocks, write_ktx2, CompressOptions, MicroTextureOptions, PackingOptions,
+    TextureFormat,
+};
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;
 use lemi_core::parallax_error::LayerDepths;
@@ -61,7 +64,8 @@ pub enum Stage {
         layers: usize,
     },
     Compress,
-    Png,
+    /// Encoding the macro-textures in the bundle's texture format (PNG, BC7, BC1).
+    Encode(TextureFormat),
     /// Simplifying the far field (HLOD).
     Simplify,
 }
@@ -77,7 +81,7 @@ impl std::fmt::Display for Stage {
                 layers,
             } => write!(f, "record {face} {}/{layers}", layer + 1),
             Stage::Compress => write!(f, "compress"),
-            Stage::Png => write!(f, "png"),
+            Stage::Encode(format) => write!(f, "{format}"),
             Stage::Simplify => write!(f, "simplify"),
         }
     }
@@ -172,6 +176,15 @@ impl<'a> Baker<'a> {
                 threshold: params.micro_threshold,
                 ..Default::default()
             },
+            packing: PackingOptions {
+                // a block format: no 4×4 block mixes two micro-textures
+                block: if params.texture_format.block().is_some() {
+                    4
+                } else {
+                    1
+                },
+                ..Default::default()
+            },
             ..Default::default()
         };
         let compressed =
@@ -182,18 +195,41 @@ impl<'a> Baker<'a> {
         drop(faces);
         seconds.push(("compress".into(), t.elapsed().as_secs_f64()));
 
-        on_stage(&Stage::Png);
+        let format = params.texture_format;
+        on_stage(&Stage::Encode(format));
         let t = Instant::now();
-        let pngs: Vec<Vec<u8>> = compressed
-            .macro_textures
-            .par_iter()
-            .map(|m| encode_png(&m.rgba, m.width, m.height))
-            .collect::<Result<_, _>>()
-            .map_err(|source| BakeError::Encode {
-                cell: cell.id(),
-                source,
-            })?;
-        seconds.push(("png".into(), t.elapsed().as_secs_f64()));
+        let encode_err = |source| BakeError::Encode {
+            cell: cell.id(),
+            source,
+        };
+        let (macro_blobs, block_bytes): (Vec<Vec<u8>>, u64) = match format.block() {
+            None => (
+                compressed
+                    .macro_textures
+                    .par_iter()
+                    .map(|m| encode_png(&m.rgba, m.width, m.height))
+                    .collect::<Result<_, _>>()
+                    .map_err(encode_err)?,
+                0,
+            ),
+            Some(block) => {
+                let encoded: Vec<(Vec<u8>, u64)> = compressed
+                    .macro_textures
+                    .par_iter()
+                    .map(|m| {
+                        let (blocks, stats) = encode_blocks(block, m.width, m.height, &m.rgba)?;
+                        Ok((write_ktx2(block, m.width, m.height, &[blocks]), stats.bytes))
+                    })
+                    .collect::<Result<_, lemi_core::compress::CompressError>>()
+                    .map_err(|source| BakeError::Compress {
+                        cell: cell.id(),
+                        source,
+                    })?;
+                let bytes = encoded.iter().map(|e| e.1).sum();
+                (encoded.into_iter().map(|e| e.0).collect(), bytes)
+            }
+        };
+        seconds.push((format.name().into(), t.elapsed().as_secs_f64()));
 
         let quads: Vec<Quad> = compressed
             .micro_textures
@@ -217,7 +253,10 @@ impl<'a> Baker<'a> {
             .iter()
             .enumerate()
             .map(|(i, m)| MacroInfo {
-                name: format!("macro{i}.png"),
+                name: match format {
+                    TextureFormat::Png => format!("macro{i}.png"),
+                    _ => format!("macro{i}.ktx2"),
+                },
                 width: m.width,
                 height: m.height,
             })
@@ -235,7 +274,17 @@ impl<'a> Baker<'a> {
             micro_fill_ratio: s.micro.fill_ratio,
             macro_textures: s.packing.macro_textures,
             macro_bytes: s.packing.macro_bytes,
-            png_bytes: pngs.iter().map(|p| p.len() as u64).sum(),
+            png_bytes: if format.is_png() {
+                macro_blobs.iter().map(|p| p.len() as u64).sum()
+            } else {
+                0
+            },
+            ktx2_bytes: if format.is_png() {
+                0
+            } else {
+                macro_blobs.iter().map(|p| p.len() as u64).sum()
+            },
+            block_bytes,
             seconds,
         };
         let layers = layer_infos(&plan);
@@ -250,11 +299,12 @@ impl<'a> Baker<'a> {
                 layers,
                 quads,
                 macros,
+                texture_format: format,
                 stats,
                 hlod: None,
             },
             near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
-            pngs,
+            macro_blobs,
         })
     }
 
@@ -305,9 +355,10 @@ impl<'a> Baker<'a> {
                 macros: Vec::new(),
                 stats,
                 hlod: Some(hlod),
+                texture_format: Default::default(),
             },
             near: near.iter().map(|r| [r.mesh, r.tri]).collect(),
-            pngs: Vec::new(),
+            macro_blobs: Vec::new(),
         })
     }
 

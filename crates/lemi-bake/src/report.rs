@@ -22,6 +22,12 @@ pub struct CellReport {
     pub raw_bytes: u64,
     pub macro_bytes: u64,
     pub png_bytes: u64,
+    /// Bytes of the KTX2 macro-textures (block formats).
+    pub ktx2_bytes: u64,
+    /// Bytes of the stored macro-textures, PNG or KTX2.
+    pub texture_bytes: u64,
+    /// Bytes the macro-textures occupy in texture memory in their stored format.
+    pub texture_memory_bytes: u64,
     pub far_triangles: u64,
     pub near_triangles: u64,
     pub submitted_triangles: u64,
@@ -44,6 +50,9 @@ impl CellReport {
             raw_bytes: s.raw_bytes,
             macro_bytes: s.macro_bytes,
             png_bytes: s.png_bytes,
+            ktx2_bytes: s.ktx2_bytes,
+            texture_bytes: s.texture_bytes(),
+            texture_memory_bytes: s.texture_memory_bytes(),
             far_triangles: s.far_triangles,
             near_triangles: s.near_triangles,
             submitted_triangles: s.submitted_triangles,
@@ -110,6 +119,8 @@ fn add(total: &mut CellStats, s: &CellStats) {
     total.macro_textures += s.macro_textures;
     total.macro_bytes += s.macro_bytes;
     total.png_bytes += s.png_bytes;
+    total.ktx2_bytes += s.ktx2_bytes;
+    total.block_bytes += s.block_bytes;
     for (k, v) in &s.seconds {
         match total.seconds.iter_mut().find(|(n, _)| n == k) {
             Some((_, t)) => *t += v,

@@ -395,6 +395,7 @@ fn params(faces: &[Face]) -> BakeParams {
         micro_grid: 8,
         micro_threshold: 0.6,
         layering: Default::default(),
+        texture_format: Default::default(),
     }
 }
 

@@ -51,6 +51,7 @@ fn params(layering: Layering) -> BakeParams {
         micro_grid: 8,
         micro_threshold: 0.6,
         layering,
+        texture_format: Default::default(),
     }
 }
 

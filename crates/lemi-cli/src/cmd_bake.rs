@@ -16,6 +16,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use lemi_bake::{BakeJob, Baker, CellOutcome};
 use lemi_core::bundle::{BakeParams, LayerTarget, Layering, ParamsError, SceneRef};
 use lemi_core::cell::{CellGrid, Shard, ViewCell};
+use lemi_core::compress::TextureFormat;
 use lemi_core::placement::{alpha_from_output_view, min_face_res_for_output_view, PixelChoice};
 use lemi_core::{Aabb, Face};
 use lemi_gpu::{BackendChoice, Gpu};
@@ -99,6 +100,10 @@ pub struct Args {
     /// is simplified in (default 2).
     #[arg(long, allow_hyphen_values = true)]
     pub hlod_band_factor: Option<f64>,
+    /// How the macro-textures are stored: png (lossless, RGBA8 in texture memory), bc7 (16 bytes
+    /// a 4×4 block) or bc1 (8 bytes a block, punch-through alpha), both in KTX2.
+    #[arg(long, default_value = "png", value_parser = parse_texture_format)]
+    pub texture_format: TextureFormat,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
     #[arg(long, default_value_t = 8)]
     pub micro_grid: u32,
@@ -114,6 +119,17 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--texture-format NAME`.
+fn parse_texture_format(name: &str) -> std::result::Result<TextureFormat, String> {
+    match name {
+        "uastc" | "etc1s" => Err(format!(
+            "{name} (Basis Universal) is not available in this lemi yet; use png, bc7 or bc1"
+        )),
+        _ => TextureFormat::from_name(name)
+            .ok_or_else(|| format!("unknown texture format `{name}`: png, bc7 or bc1")),
+    }
 }
 
 /// Default output view (as `lemi layers`).
@@ -277,6 +293,13 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
             (a, Some(fov), Some(width))
         }
     };
+    if matches!(layering, Layering::Hlod { .. }) && !args.texture_format.is_png() {
+        bail!(
+            "--texture-format {} does not apply to --strategy hlod (its far field is geometry, it \
+             has no macro-textures)",
+            args.texture_format
+        );
+    }
     let params = BakeParams {
         cell_size: args.cell_size,
         cell_height: args.cell_height,
@@ -289,6 +312,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         micro_grid: args.micro_grid,
         micro_threshold: args.micro_threshold,
         layering,
+        texture_format: args.texture_format,
     };
     params
         .validate()
@@ -495,6 +519,13 @@ pub fn run(args: Args) -> Result<()> {
         report.bytes,
     );
     let (strategy, strategy_note) = strategy_name(&params.layering);
+    // seconds of the macro-texture encode (the stage named by the format), summed over the cells
+    let encode_s: f64 = total
+        .seconds
+        .iter()
+        .filter(|(k, _)| k == params.texture_format.name())
+        .map(|(_, v)| v)
+        .sum();
     if args.json {
         let out_json = json!({
             "bundle": out,
@@ -512,6 +543,11 @@ pub fn run(args: Args) -> Result<()> {
             "raw_bytes": total.raw_bytes,
             "macro_bytes": total.macro_bytes,
             "png_bytes": total.png_bytes,
+            "texture_format": params.texture_format,
+            "ktx2_bytes": total.ktx2_bytes,
+            "texture_bytes": total.texture_bytes(),
+            "texture_memory_bytes": total.texture_memory_bytes(),
+            "encode_seconds": encode_s,
             "far_triangles": total.far_triangles,
             "near_triangles": total.near_triangles,
             "submitted_triangles": total.submitted_triangles,
@@ -562,6 +598,15 @@ pub fn run(args: Args) -> Result<()> {
         total.micro_textures,
         total.macro_textures
     );
+    if !matches!(params.layering, Layering::Hlod { .. }) {
+        println!(
+            "textures   {} per cell: {} on disk, {} in texture memory; encoded in {:.2} s per baked cell",
+            params.texture_format,
+            human(total.texture_bytes() as f64 / n),
+            human(total.texture_memory_bytes() as f64 / n),
+            encode_s / baked.max(1) as f64
+        );
+    }
     let stages: Vec<String> = total
         .seconds
         .iter()

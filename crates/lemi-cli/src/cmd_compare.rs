@@ -201,6 +201,7 @@ fn bake(args: &Args, k: StrategyKind, dir: &Path, gpu: &Gpu) -> Result<BakeRow> 
         shard: None,
         backend: args.backend.clone(),
         json: true,
+        texture_format: Default::default(),
     })?;
     let row = lemi_compare::bake(gpu, &prepared.scene, &prepared.job, k)?;
     Ok(BakeRow {

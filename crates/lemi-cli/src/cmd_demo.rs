@@ -95,6 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard: None,
         backend: args.backend.clone(),
         json: false,
+        texture_format: Default::default(),
     })?;
 
     // From the corner of the first cell, looking down the avenue.

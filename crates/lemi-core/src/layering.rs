@@ -308,6 +308,7 @@ mod tests {
             micro_grid: 8,
             micro_threshold: 0.6,
             layering,
+            texture_format: Default::default(),
         }
     }
 

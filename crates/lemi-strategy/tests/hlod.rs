@@ -53,6 +53,7 @@ fn params(error_px: f64) -> BakeParams {
             error_px,
             band_factor: 2.0,
         },
+        texture_format: Default::default(),
     }
 }
 

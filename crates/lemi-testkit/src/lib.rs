@@ -196,6 +196,7 @@ pub fn small_params(resolution: u32, target: LayerTarget) -> BakeParams {
         micro_grid: 8,
         micro_threshold: 0.6,
         layering: Layering::Optimal,
+        texture_format: Default::default(),
     }
 }
 

@@ -189,6 +189,7 @@ mod tests {
             micro_grid: 8,
             micro_threshold: 0.6,
             layering: Default::default(),
+            texture_format: Default::default(),
         }
     }
 

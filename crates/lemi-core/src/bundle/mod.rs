@@ -10,7 +10,9 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::cell::{CellGrid, CellId, ViewCell};
-use crate::compress::MacroTexture;
+use crate::compress::{
+    decode_blocks, read_ktx2, BlockFormat, Ktx2Texture, MacroTexture, TextureFormat,
+};
 use crate::container::{self, Blob, ContainerError};
 use crate::Face;
 
@@ -26,11 +28,17 @@ pub const BUNDLE_VERSION: u32 = 2;
 /// the cell header's `hlod` section and its `hlod.bin` blob (`docs/FORMAT.md`). Layered bundles
 /// stay version 2, byte for byte; a reader of version 2 only rejects an HLOD bundle by its version.
 pub const HLOD_BUNDLE_VERSION: u32 = 3;
+/// Version of the manifest and cell files of a layered bundle whose macro-textures are
+/// block-compressed in KTX2 ([`BakeParams::texture_format`] BC7 or BC1): version 2 plus the cell
+/// header's `texture_format`, one KTX2 blob per macro-texture instead of a PNG. PNG bundles stay
+/// version 2, byte for byte; a reader of versions 2 and 3 rejects a block bundle by its version.
+pub const BLOCK_BUNDLE_VERSION: u32 = 4;
 
 /// The version a bundle baked with `params` is written with.
 pub fn version_for(params: &BakeParams) -> u32 {
     match params.layering {
         Layering::Hlod { .. } => HLOD_BUNDLE_VERSION,
+        _ if params.texture_format.block().is_some() => BLOCK_BUNDLE_VERSION,
         _ => BUNDLE_VERSION,
     }
 }
@@ -104,6 +112,10 @@ pub struct BakeParams {
     /// parameters and hash of existing bundles are unchanged).
     #[serde(default, skip_serializing_if = "Layering::is_optimal")]
     pub layering: Layering,
+    /// How the macro-textures are stored (absent in the file: PNG, so the parameters and hash of
+    /// existing bundles are unchanged). Ignored by HLOD, which has no macro-textures.
+    #[serde(default, skip_serializing_if = "TextureFormat::is_png")]
+    pub texture_format: TextureFormat,
 }
 
 impl BakeParams {
@@ -196,7 +208,8 @@ impl Quad {
     }
 }
 
-/// A macro-texture: stored as a PNG blob named `name`.
+/// A macro-texture: stored as a blob named `name`, a PNG or (version 4) a KTX2 file in the cell's
+/// [`CellHeader::texture_format`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MacroInfo {
     pub name: String,
@@ -219,6 +232,13 @@ pub struct CellStats {
     pub macro_textures: u64,
     pub macro_bytes: u64,
     pub png_bytes: u64,
+    /// Bytes of the KTX2 macro-textures (block formats; absent for PNG cells).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub ktx2_bytes: u64,
+    /// Bytes of the macro-textures' block data, what they occupy in texture memory when the GPU
+    /// has the format (block formats; absent for PNG cells, which occupy `macro_bytes` as RGBA8).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub block_bytes: u64,
     /// Seconds per stage, by name. Not stored in the cell file (a cell's bytes depend only on the
     /// scene and the parameters, so shards and re-runs give identical bundles); reported by the
     /// bake's summary.
@@ -226,8 +246,28 @@ pub struct CellStats {
     pub seconds: Vec<(String, f64)>,
 }
 
+fn is_zero(v: &u64) -> bool {
+    *v == 0
+}
+
+impl CellStats {
+    /// Bytes of the stored macro-textures (PNG or KTX2).
+    pub fn texture_bytes(&self) -> u64 {
+        self.png_bytes + self.ktx2_bytes
+    }
+
+    /// Bytes the macro-textures occupy in texture memory in their stored format (RGBA8 for PNG).
+    pub fn texture_memory_bytes(&self) -> u64 {
+        if self.block_bytes > 0 {
+            self.block_bytes
+        } else {
+            self.macro_bytes
+        }
+    }
+}
+
 /// The JSON header of a cell file. Blobs: `near.bin` (the near list, `(mesh u32, tri u32)` pairs
-/// little-endian) and one PNG per macro-texture.
+/// little-endian), `quads.bin` and one PNG (version 2) or KTX2 file (version 4) per macro-texture.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CellHeader {
     pub cell: ViewCell,
@@ -244,6 +284,10 @@ pub struct CellHeader {
     #[serde(skip)]
     pub quads: Vec<Quad>,
     pub macros: Vec<MacroInfo>,
+    /// How the macro-textures are stored: PNG (absent in the file, version 2) or a block format
+    /// in KTX2 (version 4).
+    #[serde(default, skip_serializing_if = "TextureFormat::is_png")]
+    pub texture_format: TextureFormat,
     pub stats: CellStats,
     /// The simplified far field of an HLOD bundle (version 3 only); its meshes are stored in the
     /// `hlod.bin` blob.
@@ -461,7 +505,7 @@ impl Manifest {
             return Err(BundleError::invalid(
                 path,
                 format!(
-                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, and {HLOD_BUNDLE_VERSION} for HLOD bundles)",
+                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, {HLOD_BUNDLE_VERSION} for HLOD bundles and {BLOCK_BUNDLE_VERSION} for block-compressed textures, each with the parameters that call for it)",
                     m.version
                 ),
             ));
@@ -484,13 +528,14 @@ pub struct CellFile {
     pub header: CellHeader,
     /// `(mesh, triangle)` pairs drawn as geometry.
     pub near: Vec<[u32; 2]>,
-    /// PNG bytes per macro-texture, in `header.macros` order.
-    pub pngs: Vec<Vec<u8>>,
+    /// The stored macro-textures (PNG or KTX2 files, as `header.texture_format` says), in
+    /// `header.macros` order.
+    pub macro_blobs: Vec<Vec<u8>>,
 }
 
 impl CellFile {
     pub fn encode(&self) -> Result<Vec<u8>, ContainerError> {
-        let mut blobs = Vec::with_capacity(2 + self.pngs.len());
+        let mut blobs = Vec::with_capacity(2 + self.macro_blobs.len());
         blobs.push(Blob {
             name: "near.bin".into(),
             data: bytemuck::cast_slice(&self.near).to_vec(),
@@ -499,10 +544,10 @@ impl CellFile {
             name: "quads.bin".into(),
             data: encode_quads(&self.header.quads)?,
         });
-        for (m, png) in self.header.macros.iter().zip(&self.pngs) {
+        for (m, blob) in self.header.macros.iter().zip(&self.macro_blobs) {
             blobs.push(Blob {
                 name: m.name.clone(),
-                data: png.clone(),
+                data: blob.clone(),
             });
         }
         let version = match &self.header.hlod {
@@ -513,6 +558,7 @@ impl CellFile {
                 });
                 HLOD_BUNDLE_VERSION
             }
+            None if self.header.texture_format.block().is_some() => BLOCK_BUNDLE_VERSION,
             None => BUNDLE_VERSION,
         };
         container::encode(CELL_MAGIC, version, &self.header, &blobs)
@@ -523,7 +569,7 @@ impl CellFile {
             container::decode_versions(
                 CELL_MAGIC,
                 "cell",
-                BUNDLE_VERSION..=HLOD_BUNDLE_VERSION,
+                BUNDLE_VERSION..=BLOCK_BUNDLE_VERSION,
                 bytes,
             )?;
         let mut it = blobs.into_iter();
@@ -546,13 +592,13 @@ impl CellFile {
             .filter(|b| b.name == "quads.bin")
             .ok_or_else(|| ContainerError::Header("missing quads.bin".into()))?;
         header.quads = decode_quads(&quads_blob.data, &header)?;
-        let mut pngs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
+        let mut macro_blobs: Vec<Vec<u8>> = it.map(|b| b.data).collect();
         match (version, &mut header.hlod) {
             (HLOD_BUNDLE_VERSION, Some(h)) => {
-                if pngs.len() != header.macros.len() + 1 {
+                if macro_blobs.len() != header.macros.len() + 1 {
                     return Err(ContainerError::Header("missing hlod.bin".into()));
                 }
-                let data = pngs.pop().unwrap_or_default();
+                let data = macro_blobs.pop().unwrap_or_default();
                 decode_hlod(&data, h)?;
             }
             (HLOD_BUNDLE_VERSION, None) => {
@@ -567,11 +613,26 @@ impl CellFile {
             }
             _ => {}
         }
-        if pngs.len() != header.macros.len() {
+        match (version, header.texture_format.block()) {
+            (BLOCK_BUNDLE_VERSION, Some(_)) => {}
+            (BLOCK_BUNDLE_VERSION, None) => {
+                return Err(ContainerError::Header(
+                    "a version 4 cell without a block `texture_format`".into(),
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(ContainerError::Header(format!(
+                    "`texture_format` {} in a version {version} cell (block-compressed cells are version {BLOCK_BUNDLE_VERSION})",
+                    header.texture_format
+                )))
+            }
+            (_, None) => {}
+        }
+        if macro_blobs.len() != header.macros.len() {
             return Err(ContainerError::Header(format!(
                 "{} macro-textures listed but {} stored",
                 header.macros.len(),
-                pngs.len()
+                macro_blobs.len()
             )));
         }
         for (i, q) in header.quads.iter().enumerate() {
@@ -585,15 +646,62 @@ impl CellFile {
                 )));
             }
         }
-        Ok(CellFile { header, near, pngs })
+        if let Some(format) = header.texture_format.block() {
+            for (m, blob) in header.macros.iter().zip(&macro_blobs) {
+                check_ktx2(m, format, blob)?;
+            }
+        }
+        Ok(CellFile {
+            header,
+            near,
+            macro_blobs,
+        })
     }
 
-    /// Decodes the PNG macro-textures to RGBA8, checking that each has the size its header says.
-    pub fn decode_macros(&self) -> Result<Vec<MacroTexture>, ContainerError> {
+    /// The block-compressed macro-textures as stored (level 0), ready to upload to a GPU that has
+    /// the format; `None` for a PNG cell.
+    pub fn block_macros(&self) -> Result<Option<Vec<BlockMacro>>, ContainerError> {
+        let Some(format) = self.header.texture_format.block() else {
+            return Ok(None);
+        };
         self.header
             .macros
             .iter()
-            .zip(&self.pngs)
+            .zip(&self.macro_blobs)
+            .map(|(m, blob)| {
+                let mut t = check_ktx2(m, format, blob)?;
+                Ok(BlockMacro {
+                    format,
+                    width: t.width,
+                    height: t.height,
+                    data: t.levels.swap_remove(0),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Some)
+    }
+
+    /// Decodes the macro-textures to RGBA8 (PNG, or KTX2 block data decoded on the CPU), checking
+    /// that each has the size its header says.
+    pub fn decode_macros(&self) -> Result<Vec<MacroTexture>, ContainerError> {
+        if let Some(blocks) = self.block_macros()? {
+            return blocks
+                .iter()
+                .map(|b| {
+                    let rgba = decode_blocks(b.format, b.width, b.height, &b.data)
+                        .map_err(|e| ContainerError::Header(e.to_string()))?;
+                    Ok(MacroTexture {
+                        width: b.width,
+                        height: b.height,
+                        rgba,
+                    })
+                })
+                .collect();
+        }
+        self.header
+            .macros
+            .iter()
+            .zip(&self.macro_blobs)
             .map(|(m, png)| {
                 let img = image::load_from_memory_with_format(png, image::ImageFormat::Png)
                     .map_err(|e| {
@@ -618,6 +726,43 @@ impl CellFile {
             })
             .collect()
     }
+}
+
+/// A block-compressed macro-texture as stored: level 0's blocks, row-major.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct BlockMacro {
+    pub format: BlockFormat,
+    pub width: u32,
+    pub height: u32,
+    pub data: Vec<u8>,
+}
+
+/// Reads a macro-texture's KTX2 blob and checks it against its header entry and the cell's format.
+fn check_ktx2(
+    m: &MacroInfo,
+    format: BlockFormat,
+    blob: &[u8],
+) -> Result<Ktx2Texture, ContainerError> {
+    let t = read_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
+    if t.format != format || t.width != m.width || t.height != m.height {
+        return Err(ContainerError::Header(format!(
+            "{}: KTX2 of {:?} {}x{}, the header says {} {}x{}",
+            m.name,
+            t.format,
+            t.width,
+            t.height,
+            format.texture_format(),
+            m.width,
+            m.height
+        )));
+    }
+    if m.width % 4 != 0 || m.height % 4 != 0 {
+        return Err(ContainerError::Header(format!(
+            "{}: a block-compressed macro-texture of {}x{} texels (sides must be multiples of 4)",
+            m.name, m.width, m.height
+        )));
+    }
+    Ok(t)
 }
 
 /// Bytes of one quad record in `quads.bin` (before deflate).
@@ -878,9 +1023,10 @@ mod tests {
                 }],
                 stats: CellStats::default(),
                 hlod: None,
+                texture_format: Default::default(),
             },
             near: vec![[0, 1], [2, 3]],
-            pngs: vec![vec![137, 80, 78, 71]],
+            macro_blobs: vec![vec![137, 80, 78, 71]],
         }
     }
 
@@ -957,6 +1103,154 @@ mod tests {
         assert!(err.contains("hlod.bin"), "{err}");
     }
 
+    /// `sample_cell` with its 64² macro-texture block-compressed in KTX2.
+    fn block_cell(format: TextureFormat) -> (CellFile, Vec<u8>) {
+        let rgba: Vec<u8> = (0..64 * 64)
+            .flat_map(|i| {
+                [
+                    (i % 64 * 4) as u8,
+                    (i / 64 * 4) as u8,
+                    90,
+                    (i % 3 != 0) as u8 * 255,
+                ]
+            })
+            .collect();
+        let block = format.block().unwrap();
+        let (blocks, _) = crate::compress::encode_blocks(block, 64, 64, &rgba).unwrap();
+        let mut c = sample_cell();
+        c.header.texture_format = format;
+        c.header.macros[0].name = "macro0.ktx2".into();
+        c.macro_blobs = vec![crate::compress::write_ktx2(block, 64, 64, &[blocks])];
+        (c, rgba)
+    }
+
+    #[test]
+    fn block_compressed_cells_are_version_4_and_round_trip() {
+        for format in [TextureFormat::Bc7, TextureFormat::Bc1] {
+            let (c, rgba) = block_cell(format);
+            let bytes = c.encode().unwrap();
+            assert_eq!(bytes[8..12], BLOCK_BUNDLE_VERSION.to_le_bytes());
+            let back = CellFile::decode(&bytes).unwrap();
+            assert_eq!(back, c);
+            let blocks = back.block_macros().unwrap().unwrap();
+            assert_eq!(
+                (blocks[0].format, blocks[0].width),
+                (format.block().unwrap(), 64)
+            );
+            assert_eq!(
+                blocks[0].data.len(),
+                format.block().unwrap().image_bytes(64, 64)
+            );
+            // the CPU fallback decodes with the alpha test intact
+            let m = back.decode_macros().unwrap();
+            for (a, b) in rgba.chunks_exact(4).zip(m[0].rgba.chunks_exact(4)) {
+                assert_eq!(a[3] >= 128, b[3] >= 128);
+            }
+        }
+        // a PNG cell has no block macros and stays version 2
+        assert_eq!(sample_cell().block_macros().unwrap(), None);
+        assert_eq!(
+            sample_cell().encode().unwrap()[8..12],
+            BUNDLE_VERSION.to_le_bytes()
+        );
+    }
+
+    #[test]
+    fn damaged_ktx2_in_a_cell_is_a_clear_error() {
+        let (c, _) = block_cell(TextureFormat::Bc7);
+        let decode_err = |c: &CellFile| {
+            CellFile::decode(&c.encode().unwrap())
+                .unwrap_err()
+                .to_string()
+        };
+        // truncated KTX2 (the cell's own checksum is recomputed by encode: the KTX2 checks see it)
+        let mut bad = c.clone();
+        let n = bad.macro_blobs[0].len();
+        bad.macro_blobs[0].truncate(n - 100);
+        let e = decode_err(&bad);
+        assert!(e.contains("macro0.ktx2") && e.contains("truncated"), "{e}");
+        // not KTX2 at all
+        let mut bad = c.clone();
+        bad.macro_blobs[0] = vec![137, 80, 78, 71];
+        let e = decode_err(&bad);
+        assert!(e.contains("macro0.ktx2") && e.contains("identifier"), "{e}");
+        // another format than the header's
+        let mut bad = c.clone();
+        bad.header.texture_format = TextureFormat::Bc1;
+        let e = decode_err(&bad);
+        assert!(e.contains("the header says bc1"), "{e}");
+        // another size than the header's
+        let mut bad = c.clone();
+        bad.header.macros[0].width = 32;
+        let e = decode_err(&bad);
+        assert!(e.contains("the header says bc7 32x64"), "{e}");
+        // the version and the format disagree: a version 2 cell naming a block format, a
+        // version 4 cell without one
+        let blobs = |c: &CellFile| {
+            vec![
+                Blob {
+                    name: "near.bin".into(),
+                    data: bytemuck::cast_slice(&c.near).to_vec(),
+                },
+                Blob {
+                    name: "quads.bin".into(),
+                    data: encode_quads(&c.header.quads).unwrap(),
+                },
+                Blob {
+                    name: c.header.macros[0].name.clone(),
+                    data: c.macro_blobs[0].clone(),
+                },
+            ]
+        };
+        let v2 = container::encode(CELL_MAGIC, BUNDLE_VERSION, &c.header, &blobs(&c)).unwrap();
+        let e = CellFile::decode(&v2).unwrap_err().to_string();
+        assert!(
+            e.contains("`texture_format` bc7 in a version 2 cell"),
+            "{e}"
+        );
+        let png = sample_cell();
+        let v4 =
+            container::encode(CELL_MAGIC, BLOCK_BUNDLE_VERSION, &png.header, &blobs(&png)).unwrap();
+        let e = CellFile::decode(&v4).unwrap_err().to_string();
+        assert!(e.contains("version 4 cell without"), "{e}");
+        // one bit flipped anywhere in the file fails the cell's checksum first
+        let mut bytes = c.encode().unwrap();
+        let mid = bytes.len() / 2;
+        bytes[mid] ^= 1;
+        assert!(CellFile::decode(&bytes).is_err());
+    }
+
+    #[test]
+    fn texture_format_is_part_of_the_params_hash_only_when_not_png() {
+        let mut p = BakeParams {
+            cell_size: 10.0,
+            cell_height: None,
+            resolution: 64,
+            target: LayerTarget::Layers(8),
+            faces: vec![Face::PosX],
+            alpha: 0.001,
+            output_fov_deg: None,
+            output_width: None,
+            micro_grid: 8,
+            micro_threshold: 0.5,
+            layering: Layering::Optimal,
+            texture_format: TextureFormat::Png,
+        };
+        let png = p.hash();
+        let json = serde_json::to_string(&p).unwrap();
+        assert!(!json.contains("texture_format"), "{json}");
+        assert_eq!(version_for(&p), BUNDLE_VERSION);
+        p.texture_format = TextureFormat::Bc7;
+        assert_ne!(p.hash(), png);
+        assert!(serde_json::to_string(&p)
+            .unwrap()
+            .contains("\"texture_format\":\"bc7\""));
+        assert_eq!(version_for(&p), BLOCK_BUNDLE_VERSION);
+        let bc7 = p.hash();
+        p.texture_format = TextureFormat::Bc1;
+        assert!(p.hash() != bc7 && p.hash() != png);
+    }
+
     #[test]
     fn macro_texel_corners_undo_the_rotation() {
         use crate::compress::MacroPlacement;
@@ -997,12 +1291,12 @@ mod tests {
         let mut c = sample_cell();
         c.header.macros[0].width = 6;
         c.header.macros[0].height = 4;
-        c.pngs = vec![png];
+        c.macro_blobs = vec![png];
         let m = c.decode_macros().unwrap();
         assert_eq!(m[0].rgba, rgba);
         c.header.macros[0].width = 7;
         assert!(c.decode_macros().is_err());
-        c.pngs = vec![vec![1, 2, 3]];
+        c.macro_blobs = vec![vec![1, 2, 3]];
         assert!(c.decode_macros().is_err());
     }
 }

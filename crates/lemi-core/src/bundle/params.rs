@@ -137,6 +137,7 @@ mod tests {
             micro_grid: 8,
             micro_threshold: 0.5,
             layering: Layering::Optimal,
+            texture_format: Default::default(),
         }
     }
 

@@ -54,6 +54,10 @@ impl TextureFormat {
         }
     }
 
+    pub fn is_png(&self) -> bool {
+        *self == TextureFormat::Png
+    }
+
     /// The block format, `None` for PNG.
     pub fn block(self) -> Option<BlockFormat> {
         match self {
