@@ -274,24 +274,15 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
     let (cell, file) = opened
         .cell_at(cam.eye)
         .context("the eye must lie in a baked cell")?;
-    let macros = file
-        .decode_macros()
-        .with_context(|| format!("{}: macro-textures", bundle.display()))?;
     let gpu = Gpu::new(backend)?;
     let t = Instant::now();
     let materials = std::sync::Arc::new(
         lemi_gpu::GpuMaterials::upload(&gpu, &scene.materials, &scene.textures)
             .context("uploading the scene's materials")?,
     );
-    let impostor_cell = lemi_gpu::ImpostorCell::upload(
-        &gpu,
-        materials,
-        &scene,
-        &file.near,
-        &file.header.quads,
-        &macros,
-    )
-    .context("uploading the cell")?;
+    // block-compressed macro-textures as stored where the adapter has the format
+    let impostor_cell = lemi_gpu::ImpostorCell::upload_file(&gpu, materials, &scene, &file)
+        .with_context(|| format!("{}: uploading the cell", bundle.display()))?;
     let upload_seconds = t.elapsed().as_secs_f64();
     let renderer = lemi_gpu::ImpostorRenderer::new(&gpu)?;
     let options = RenderOptions {

@@ -167,18 +167,11 @@ impl CellRenderer for LayeredCells<'_> {
         let gpu_err = |what: String| move |e: lemi_gpu::GpuError| err(format!("{what}: {e}"));
         self.current = None;
         let file = self.bundle.cell(id).map_err(|e| err(e.to_string()))?;
-        let macros = file
-            .decode_macros()
-            .map_err(|e| err(format!("cell {id}: {e}")))?;
-        let gpu_cell = ImpostorCell::upload(
-            self.gpu,
-            self.materials.clone(),
-            self.scene,
-            &file.near,
-            &file.header.quads,
-            &macros,
-        )
-        .map_err(gpu_err(format!("uploading cell {id}")))?;
+        // block-compressed macro-textures as the runtime uploads them: as stored where the
+        // adapter has the format
+        let gpu_cell =
+            ImpostorCell::upload_file(self.gpu, self.materials.clone(), self.scene, &file)
+                .map_err(gpu_err(format!("uploading cell {id}")))?;
         let depths = self
             .recorder
             .record_depths(cell)

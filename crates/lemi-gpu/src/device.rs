@@ -184,8 +184,11 @@ impl Gpu {
             let Some(adapter) = adapter else { continue };
             let info = adapter.get_info();
             // Timestamp queries when the adapter has them (lavapipe does; llvmpipe's GL does not):
-            // the renderers time their passes with them (`Renderer::last_gpu_ms`).
-            let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+            // the renderers time their passes with them (`Renderer::last_gpu_ms`). BC texture
+            // compression when it has it (lavapipe does): block-compressed macro-textures are
+            // then uploaded as they are stored (`ImpostorCell::begin_upload`).
+            let features = adapter.features()
+                & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TEXTURE_COMPRESSION_BC);
             let (device, queue) = adapter
                 .request_device(&wgpu::DeviceDescriptor {
                     label: Some("lemi"),
@@ -259,6 +262,18 @@ impl Gpu {
         self.device
             .features()
             .contains(wgpu::Features::TIMESTAMP_QUERY)
+    }
+
+    /// Whether the device samples macro-textures of `format` as they are stored (BC7 and BC1
+    /// need `TEXTURE_COMPRESSION_BC`, requested whenever the adapter has it); elsewhere they are
+    /// decoded to RGBA8 on the CPU.
+    pub fn has_block_format(&self, format: lemi_core::compress::BlockFormat) -> bool {
+        match format {
+            lemi_core::compress::BlockFormat::Bc7 | lemi_core::compress::BlockFormat::Bc1 => self
+                .device
+                .features()
+                .contains(wgpu::Features::TEXTURE_COMPRESSION_BC),
+        }
     }
 
     /// The bind group layouts of the shared shading module (group 0: globals, group 1: material).

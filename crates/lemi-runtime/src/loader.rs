@@ -46,6 +46,11 @@ pub struct LoaderOptions {
     /// macro-textures are laid out for it ([`ImpostorCellData::prepare_for`]). The streamer sets
     /// it from its GPU.
     pub texture_side: u32,
+    /// Whether the adapter samples the bundle's block-compressed macro-textures (BC7, BC1) as
+    /// stored: they are then handed to the upload as they are
+    /// ([`ImpostorCellData::with_blocks`]), else decoded to RGBA8. The streamer sets it from its
+    /// GPU.
+    pub block_formats: bool,
 }
 
 impl Default for LoaderOptions {
@@ -54,6 +59,7 @@ impl Default for LoaderOptions {
             threads: 1,
             delay: Duration::ZERO,
             texture_side: lemi_gpu::DEFAULT_PAGE_SIDE,
+            block_formats: false,
         }
     }
 }
@@ -111,6 +117,7 @@ struct Context {
     scene: Arc<Scene>,
     delay: Duration,
     texture_side: u32,
+    block_formats: bool,
 }
 
 struct Shared {
@@ -156,6 +163,7 @@ impl Loader {
                 scene,
                 delay: options.delay,
                 texture_side: options.texture_side,
+                block_formats: options.block_formats,
             },
         });
         let (tx, results) = mpsc::channel();
@@ -325,6 +333,11 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
                 message: e.kind.to_string(),
             })?;
     let path = ctx.bundle.cell_path(id);
+    let blocks = match file.block_macros() {
+        Ok(Some(b)) if ctx.block_formats => Some(b),
+        Ok(_) => None,
+        Err(e) => return Err(err(e.to_string())),
+    };
     let macros = file.decode_macros().map_err(|e| err(e.to_string()))?;
     let CellFile {
         mut header, near, ..
@@ -336,6 +349,10 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
             "does not fit the scene it is drawn with: {e} (is it the scene the bundle was baked from?)"
         ))
     })?;
+    let data = match blocks {
+        Some(b) => data.with_blocks(b).map_err(|e| err(e.to_string()))?,
+        None => data,
+    };
     Ok(DecodedCell {
         id,
         path,

@@ -274,6 +274,19 @@ impl Streamer {
             baked.insert(e.id, e.bytes);
         }
         let grid = manifest.grid.clone();
+        let block_formats = match manifest.params.texture_format.block() {
+            Some(format) if !gpu.has_block_format(format) => {
+                eprintln!(
+                    "warning: this adapter cannot sample {} textures: the bundle's \
+                     macro-textures are decoded to RGBA8 ({}x their texture memory)",
+                    format.texture_format(),
+                    64 / format.block_bytes()
+                );
+                false
+            }
+            Some(_) => true,
+            None => false,
+        };
         let bundle =
             Bundle::from_manifest(bundle_dir, manifest).map_err(|e| bad(e.kind.to_string()))?;
         let loader = Loader::spawn(
@@ -281,6 +294,7 @@ impl Streamer {
             scene,
             LoaderOptions {
                 texture_side: gpu.limits().max_texture_dimension_2d,
+                block_formats,
                 ..options.loader.clone()
             },
         )?;

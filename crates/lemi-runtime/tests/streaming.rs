@@ -864,3 +864,72 @@ fn cells_truncated_or_replaced_during_the_walk_fall_back_once() {
     }
     assert_eq!(st.stats().failures, 2);
 }
+
+/// A block-compressed (BC7) bundle of the same scene streams like a PNG one; its cell is uploaded
+/// as stored where the adapter has BC (lavapipe does) and the cache counts the bytes resident on
+/// the GPU: the block pages, a quarter of the PNG cell's RGBA8 pages.
+#[test]
+fn block_compressed_cells_stream_and_the_cache_counts_resident_bytes() {
+    use lemi_core::compress::{BlockFormat, TextureFormat};
+    let _serial = serial();
+    let Some(fx) = fixture() else { return };
+    let Some(s) = setup(fx) else { return };
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bundle = dir.path().join("bc7");
+    let p = BakeParams {
+        texture_format: TextureFormat::Bc7,
+        ..params()
+    };
+    let grid = grid();
+    let job = BakeJob {
+        bundle: bundle.clone(),
+        scene: SceneRef {
+            sources: vec!["test:streaming".into()],
+            up: "y".into(),
+            fingerprint: "fingerprint-of-the-streaming-scene".into(),
+            triangles: s.scene.triangle_count(),
+        },
+        params: p.clone(),
+        cells: vec![grid.cell_of(id("2_0_0")).expect("cell")],
+        grid,
+        shard: None,
+    };
+    let baker = Baker::new(&s.gpu, &s.scene, p).expect("baker");
+    run(&job, |cell| baker.bake(cell, |_| {}), |_, _, _| {}).expect("bake");
+    let file = read_cell(&bundle, "2_0_0");
+    let direct =
+        ImpostorCell::upload_file(&s.gpu, s.materials.clone(), &s.scene, &file).expect("upload");
+    let bc = s.gpu.has_block_format(BlockFormat::Bc7);
+    assert_eq!(direct.texture_format().is_compressed(), bc);
+    let options = StreamerOptions {
+        horizon_seconds: 0.1,
+        max_speed: 0.1,
+        ..Default::default()
+    };
+    let mut st = streamer(&s, &bundle, options);
+    let (p0, v0) = (DVec3::new(0.0, EYE, 0.0), DVec3::ZERO);
+    let warnings = st
+        .preload(p0, v0, Duration::from_secs(60))
+        .expect("preload");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let f = st.frame(p0, v0, 1.0 / 30.0);
+    assert!(f.ready.is_some() && !f.stalled, "{f:?}");
+    assert_eq!(
+        st.cached_cells(),
+        vec![(id("2_0_0"), CellState::Ready)],
+        "only the current cell"
+    );
+    assert_eq!(st.cache_bytes(), direct.gpu_bytes());
+    let png = one_shot(&s, &fx.bundle, "2_0_0");
+    eprintln!(
+        "cell 2_0_0 resident: BC7 {} texture bytes of {} in all, PNG {} of {}",
+        direct.resident_texture_bytes(),
+        direct.gpu_bytes(),
+        png.resident_texture_bytes(),
+        png.gpu_bytes()
+    );
+    if bc {
+        assert!(4 * direct.resident_texture_bytes() <= png.resident_texture_bytes() * 3 / 2);
+        assert!(st.cache_bytes() < png.gpu_bytes());
+    }
+}

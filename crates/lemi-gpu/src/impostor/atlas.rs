@@ -35,6 +35,7 @@ pub(super) struct Atlas {
 
 impl Atlas {
     /// Texels of all pages.
+    #[cfg(test)]
     pub(super) fn texels(&self) -> u64 {
         self.pages.iter().map(|&(w, h)| w as u64 * h as u64).sum()
     }

@@ -4,6 +4,7 @@
 //! the module docs of [`crate::impostor`] for the order and why.
 
 use bytemuck::{Pod, Zeroable};
+use lemi_core::bundle::BlockMacro;
 use lemi_core::bundle::Quad;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::MacroTexture;
@@ -285,6 +286,9 @@ pub struct ImpostorCellData {
     pub(super) near_meshes: Vec<Mesh>,
     pub(super) geometry: QuadGeometry,
     pub(super) macros: Vec<MacroTexture>,
+    /// The macro-textures as stored block-compressed, uploaded as they are
+    /// ([`ImpostorCellData::with_blocks`]); the RGBA8 copies are then dropped.
+    pub(super) blocks: Option<Vec<BlockMacro>>,
     pub(super) quad_count: usize,
 }
 
@@ -329,8 +333,48 @@ impl ImpostorCellData {
             near_meshes,
             geometry,
             macros,
+            blocks: None,
             quad_count: quads.len(),
         })
+    }
+
+    /// Uploads the macro-textures as the block-compressed `blocks` of the cell file
+    /// (`CellFile::block_macros`: the same macro-textures, in order) instead of the RGBA8 data
+    /// they were prepared with, which is dropped (the quads' layout, made from it, stays). For an
+    /// adapter with the format ([`crate::Gpu::has_block_format`]; [`ImpostorCell::begin_upload`] refuses
+    /// the cell otherwise). Sizes that differ from the RGBA8 ones, or that are not multiples of
+    /// 4, are [`GpuError::Invalid`].
+    pub fn with_blocks(mut self, blocks: Vec<BlockMacro>) -> Result<ImpostorCellData, GpuError> {
+        if blocks.len() != self.macros.len() {
+            return Err(GpuError::Invalid(format!(
+                "{} block-compressed macro-textures for {} macro-textures",
+                blocks.len(),
+                self.macros.len()
+            )));
+        }
+        for (i, (b, m)) in blocks.iter().zip(&self.macros).enumerate() {
+            let expected = b.format.image_bytes(b.width, b.height);
+            if (b.width, b.height) != (m.width, m.height)
+                || b.width % 4 != 0
+                || b.height % 4 != 0
+                || b.data.len() != expected
+            {
+                return Err(GpuError::Invalid(format!(
+                    "block-compressed macro-texture {i} is {}x{} with {} bytes ({expected} expected), \
+                     the macro-texture {}x{} (sides must be multiples of 4)",
+                    b.width,
+                    b.height,
+                    b.data.len(),
+                    m.width,
+                    m.height
+                )));
+            }
+        }
+        for m in &mut self.macros {
+            m.rgba = Vec::new();
+        }
+        self.blocks = Some(blocks);
+        Ok(self)
     }
 
     pub fn quad_count(&self) -> usize {
@@ -345,9 +389,13 @@ impl ImpostorCellData {
             .sum()
     }
 
-    /// Bytes of macro-texture data (RGBA8), what the GPU will hold as textures.
+    /// Bytes of macro-texture data (RGBA8, or the blocks with [`ImpostorCellData::with_blocks`]),
+    /// what the GPU will hold as textures.
     pub fn texture_bytes(&self) -> u64 {
-        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+        match &self.blocks {
+            Some(b) => b.iter().map(|b| b.data.len() as u64).sum(),
+            None => self.macros.iter().map(|m| m.rgba.len() as u64).sum(),
+        }
     }
 
     /// Bytes of vertex and index data (near geometry and quads), uploaded by
@@ -374,11 +422,11 @@ impl ImpostorCellData {
     /// The largest macro-texture's bytes (how much [`PendingImpostorCell`] may hold twice, on the
     /// CPU and the GPU, while it uploads).
     pub fn largest_texture_bytes(&self) -> u64 {
-        self.macros
-            .iter()
-            .map(|m| m.rgba.len() as u64)
-            .max()
-            .unwrap_or(0)
+        match &self.blocks {
+            Some(b) => b.iter().map(|b| b.data.len() as u64).max(),
+            None => self.macros.iter().map(|m| m.rgba.len() as u64).max(),
+        }
+        .unwrap_or(0)
     }
 }
 

@@ -258,7 +258,8 @@ impl ImpostorRenderer {
                 )));
             }
         }
-        if cell.macro_format != self.macro_format && !cell.draws.is_empty() {
+        // RGBA8 or block-compressed pages alike, as long as both decode sRGB or neither does
+        if cell.macro_format.is_srgb() != self.macro_format.is_srgb() && !cell.draws.is_empty() {
             return Err(GpuError::Invalid(format!(
                 "the cell's macro-textures are {:?} but this renderer draws {:?} ones: the cell was \
                  uploaded on another device",

@@ -10,8 +10,8 @@
 
 use std::sync::Arc;
 
-use lemi_core::bundle::Quad;
-use lemi_core::compress::MacroTexture;
+use lemi_core::bundle::{CellFile, Quad};
+use lemi_core::compress::{BlockFormat, MacroTexture};
 use lemi_core::Scene;
 use wgpu::util::DeviceExt;
 
@@ -67,7 +67,7 @@ pub struct ImpostorCell {
     texture_bytes: u64,
     /// Bytes of the atlas pages on the GPU.
     page_bytes: u64,
-    /// The macro-textures' format ([`macro_format`]).
+    /// The atlas pages' format ([`macro_format`], or its block-compressed counterpart).
     pub(super) macro_format: wgpu::TextureFormat,
 }
 
@@ -100,6 +100,37 @@ impl ImpostorCell {
         pending.finish()
     }
 
+    /// [`ImpostorCell::upload`] of a cell file: block-compressed macro-textures (bundle version
+    /// 4) go to the GPU as they are stored where this adapter samples their format
+    /// ([`Gpu::has_block_format`]), and are decoded to RGBA8 elsewhere (as PNG ones are).
+    /// Macro-textures that do not decode are [`GpuError::Invalid`].
+    pub fn upload_file(
+        gpu: &Gpu,
+        materials: Arc<GpuMaterials>,
+        scene: &Scene,
+        file: &CellFile,
+    ) -> Result<ImpostorCell, GpuError> {
+        let bad = |e: lemi_core::container::ContainerError| GpuError::Invalid(e.to_string());
+        let macros = file.decode_macros().map_err(bad)?;
+        let side = gpu.limits().max_texture_dimension_2d;
+        let data =
+            ImpostorCellData::prepare_for(scene, &file.near, &file.header.quads, macros, side)?;
+        let data = match file.block_macros().map_err(bad)? {
+            Some(b) if b.first().is_some_and(|m| gpu.has_block_format(m.format)) => {
+                data.with_blocks(b)?
+            }
+            _ => data,
+        };
+        let mut pending = ImpostorCell::begin_upload(gpu, materials, data)?;
+        pending.upload_step(gpu, u64::MAX)?;
+        pending.finish()
+    }
+
+    /// The atlas pages' texture format (RGBA8, or BC7/BC1 for blocks uploaded as stored).
+    pub fn texture_format(&self) -> wgpu::TextureFormat {
+        self.macro_format
+    }
+
     /// Triangles of the near geometry on the GPU.
     pub fn near_triangles(&self) -> u64 {
         self.near.triangle_count()
@@ -110,7 +141,7 @@ impl ImpostorCell {
         self.quad_count
     }
 
-    /// Bytes of macro-texture data (RGBA8, no mipmaps), what the cell uploads.
+    /// Bytes of macro-texture data (RGBA8, or BC7/BC1 blocks; no mipmaps), what the cell uploads.
     pub fn texture_bytes(&self) -> u64 {
         self.texture_bytes
     }
@@ -154,6 +185,38 @@ pub(super) fn macro_format(device: &wgpu::Device) -> wgpu::TextureFormat {
     }
 }
 
+/// The page format of block-compressed macro-textures: the block format's variant that matches
+/// [`macro_format`] (sRGB-decoded where the quads draw into the sRGB view, passed through where
+/// they draw into the linear view), so a renderer draws both kinds of cells alike.
+fn block_page_format(device: &wgpu::Device, format: BlockFormat) -> wgpu::TextureFormat {
+    let srgb = macro_format(device).is_srgb();
+    match (format, srgb) {
+        (BlockFormat::Bc7, false) => wgpu::TextureFormat::Bc7RgbaUnorm,
+        (BlockFormat::Bc7, true) => wgpu::TextureFormat::Bc7RgbaUnormSrgb,
+        (BlockFormat::Bc1, false) => wgpu::TextureFormat::Bc1RgbaUnorm,
+        (BlockFormat::Bc1, true) => wgpu::TextureFormat::Bc1RgbaUnormSrgb,
+    }
+}
+
+/// Bytes of a `width × height` texture of `format` (RGBA8 or a 4×4 block format).
+fn texture_bytes_of(format: wgpu::TextureFormat, width: u32, height: u32) -> u64 {
+    let (bw, bh) = format.block_dimensions();
+    let blocks = width.div_ceil(bw) as u64 * height.div_ceil(bh) as u64;
+    blocks * format.block_copy_size(None).unwrap_or(4) as u64
+}
+
+/// One macro-texture's data on its way to the GPU, in upload rows: texel rows for RGBA8, rows
+/// of 4×4 blocks for a block format.
+struct MacroUpload {
+    width: u32,
+    height: u32,
+    /// Texel rows per upload row (1, or 4 for blocks).
+    row_texels: u32,
+    /// Bytes per upload row.
+    row_bytes: u64,
+    data: Vec<u8>,
+}
+
 /// A cell whose upload is in progress: the geometry is on the GPU, the macro-textures are written
 /// row by row into their atlas pages by [`PendingImpostorCell::upload_step`]. It cannot be drawn
 /// (there is no way to hand it to [`ImpostorRenderer`]); [`PendingImpostorCell::finish`] turns a
@@ -171,8 +234,8 @@ pub struct PendingImpostorCell {
     atlas: Atlas,
     /// The pages' textures and bind groups created so far, by page.
     pages: Vec<Option<(wgpu::Texture, wgpu::BindGroup)>>,
-    /// CPU copies; a completed macro-texture's `rgba` is emptied.
-    macros: Vec<MacroTexture>,
+    /// CPU copies; a completed macro-texture's `data` is emptied.
+    macros: Vec<MacroUpload>,
     draws: Vec<QuadDraw>,
     bounds: Vec<Bounds>,
     quad_count: usize,
@@ -217,6 +280,37 @@ impl ImpostorCell {
             }
         }
         let texture_bytes = data.texture_bytes();
+        let page_format = match data.blocks.as_ref().and_then(|b| b.first()) {
+            Some(b) if !gpu.has_block_format(b.format) => {
+                return Err(GpuError::Invalid(format!(
+                    "this adapter cannot sample {} macro-textures: upload them decoded to RGBA8",
+                    b.format.texture_format()
+                )))
+            }
+            Some(b) => block_page_format(&gpu.device, b.format),
+            None => macro_format(&gpu.device),
+        };
+        if page_format.is_compressed() {
+            // copies into a block-compressed page must be block-aligned
+            let aligned = |v: u32| v % 4 == 0;
+            let pages_ok = data
+                .geometry
+                .atlas
+                .pages
+                .iter()
+                .all(|&(w, h)| aligned(w) && aligned(h));
+            let places_ok = data
+                .geometry
+                .atlas
+                .places
+                .iter()
+                .all(|p| aligned(p.x) && aligned(p.y));
+            if !pages_ok || !places_ok {
+                return Err(GpuError::Invalid(
+                    "block-compressed macro-textures packed off 4×4 block boundaries".into(),
+                ));
+            }
+        }
         let ImpostorCellData {
             near_meshes,
             geometry:
@@ -229,8 +323,31 @@ impl ImpostorCell {
                     opaque_quads,
                 },
             macros,
+            blocks,
             quad_count,
         } = data;
+        let macros: Vec<MacroUpload> = match blocks {
+            Some(blocks) => blocks
+                .into_iter()
+                .map(|b| MacroUpload {
+                    width: b.width,
+                    height: b.height,
+                    row_texels: 4,
+                    row_bytes: (b.width / 4) as u64 * b.format.block_bytes() as u64,
+                    data: b.data,
+                })
+                .collect(),
+            None => macros
+                .into_iter()
+                .map(|m| MacroUpload {
+                    width: m.width,
+                    height: m.height,
+                    row_texels: 1,
+                    row_bytes: 4 * m.width as u64,
+                    data: m.rgba,
+                })
+                .collect(),
+        };
         let vertex_bytes = std::mem::size_of_val(vertices.as_slice()) as u64;
         let index_bytes = std::mem::size_of_val(indices.as_slice()) as u64;
         if vertex_bytes.max(index_bytes) > limits.max_buffer_size {
@@ -284,7 +401,7 @@ impl ImpostorCell {
             quad_count,
             opaque_quads,
             texture_bytes,
-            macro_format: macro_format(&gpu.device),
+            macro_format: page_format,
             geometry_bytes,
             next_macro: 0,
             next_row: 0,
@@ -324,8 +441,8 @@ impl PendingImpostorCell {
         gpu.scoped("uploading macro-texture rows", || {
             let mut written = 0u64;
             while let Some(m) = self.macros.get(self.next_macro) {
-                let row_bytes = 4 * m.width as u64;
-                let rows_left = m.height - self.next_row;
+                let row_bytes = m.row_bytes;
+                let rows_left = m.height / m.row_texels - self.next_row;
                 let fit = (max_bytes.saturating_sub(written) / row_bytes).min(rows_left as u64);
                 let rows = if written == 0 { fit.max(1) } else { fit } as u32;
                 if rows == 0 {
@@ -361,29 +478,30 @@ impl PendingImpostorCell {
                         mip_level: 0,
                         origin: wgpu::Origin3d {
                             x,
-                            y: y + self.next_row,
+                            y: y + self.next_row * m.row_texels,
                             z: 0,
                         },
                         aspect: wgpu::TextureAspect::All,
                     },
-                    &m.rgba[start..end],
+                    &m.data[start..end],
                     wgpu::TexelCopyBufferLayout {
                         offset: 0,
-                        bytes_per_row: Some(4 * m.width),
+                        bytes_per_row: Some(row_bytes as u32),
+                        // rows of blocks for a block format
                         rows_per_image: Some(rows),
                     },
                     wgpu::Extent3d {
                         width: m.width,
-                        height: rows,
+                        height: rows * m.row_texels,
                         depth_or_array_layers: 1,
                     },
                 );
                 written += rows as u64 * row_bytes;
                 self.uploaded += rows as u64 * row_bytes;
                 self.next_row += rows;
-                if self.next_row == m.height {
+                if self.next_row * m.row_texels == m.height {
                     // Complete: the page stays alive through its bind group.
-                    self.macros[self.next_macro].rgba = Vec::new();
+                    self.macros[self.next_macro].data = Vec::new();
                     self.next_macro += 1;
                     self.next_row = 0;
                 }
@@ -421,19 +539,21 @@ impl PendingImpostorCell {
     pub fn gpu_bytes(&self) -> u64 {
         let pages: u64 = (self.atlas.pages.iter().zip(&self.pages))
             .filter(|(_, made)| made.is_some())
-            .map(|(&(w, h), _)| 4 * w as u64 * h as u64)
+            .map(|(&(w, h), _)| texture_bytes_of(self.macro_format, w, h))
             .sum();
         self.geometry_bytes + pages
     }
 
     /// Bytes of macro-texture data still held in main memory.
     pub fn cpu_bytes(&self) -> u64 {
-        self.macros.iter().map(|m| m.rgba.len() as u64).sum()
+        self.macros.iter().map(|m| m.data.len() as u64).sum()
     }
 
     /// The drawable cell; [`GpuError::Invalid`] if some macro-texture is not completely written.
     pub fn finish(self) -> Result<ImpostorCell, GpuError> {
-        let page_bytes = 4 * self.atlas.texels();
+        let page_bytes: u64 = (self.atlas.pages.iter())
+            .map(|&(w, h)| texture_bytes_of(self.macro_format, w, h))
+            .sum();
         let page_groups: Option<Vec<wgpu::BindGroup>> = (self.pages.into_iter())
             .map(|p| p.map(|(_, g)| g))
             .collect();
@@ -509,6 +629,128 @@ mod tests {
     use crate::impostor::test_support::{gpu, pattern, quad, scene, view};
     use crate::{ImpostorRenderer, RenderOptions};
     use lemi_core::scene::ExtractError;
+
+    /// Block-compressed macro-textures uploaded as stored, in chunks of block rows: every budget
+    /// renders like the one-shot upload, the pages are in the block format and hold its bytes
+    /// (a quarter of RGBA8 for BC7, an eighth for BC1), and the picture has the coverage of the
+    /// same blocks decoded to RGBA8 on the CPU, colours within the decoders' rounding.
+    #[test]
+    fn block_compressed_macro_textures_upload_in_block_rows() {
+        use lemi_core::bundle::BlockMacro;
+        use lemi_core::compress::{decode_blocks, encode_blocks};
+        let Some(gpu) = gpu() else { return };
+        if !gpu.has_block_format(BlockFormat::Bc7) {
+            eprintln!("SKIPPED block_compressed_macro_textures_upload_in_block_rows: no BC on this adapter");
+            return;
+        }
+        let scene = scene();
+        let materials =
+            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+        let rgba = vec![pattern(16, 12, 0), pattern(32, 16, 1), pattern(8, 20, 2)];
+        let quads = [
+            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
+            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
+            quad(2, [0, 0, 8, 20], [0.5, 3.5, 0.5, 4.0, -5.5]),
+            quad(1, [4, 4, 8, 8], [-1.0, 1.0, -1.0, 1.0, -7.0]),
+        ];
+        let near = [[0u32, 0u32]];
+        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        let (view, opts) = (view(), RenderOptions::default());
+        let rgba_cell = ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &rgba)
+            .expect("RGBA8 upload");
+        for format in [BlockFormat::Bc7, BlockFormat::Bc1] {
+            let blocks: Vec<BlockMacro> = rgba
+                .iter()
+                .map(|m| BlockMacro {
+                    format,
+                    width: m.width,
+                    height: m.height,
+                    data: encode_blocks(format, m.width, m.height, &m.rgba)
+                        .expect("encode")
+                        .0,
+                })
+                .collect();
+            let decoded: Vec<MacroTexture> = blocks
+                .iter()
+                .map(|b| MacroTexture {
+                    width: b.width,
+                    height: b.height,
+                    rgba: decode_blocks(b.format, b.width, b.height, &b.data).expect("decode"),
+                })
+                .collect();
+            let prepare = || {
+                ImpostorCellData::prepare(&scene, &near, &quads, decoded.clone())
+                    .expect("prepare")
+                    .with_blocks(blocks.clone())
+                    .expect("blocks")
+            };
+            let total: u64 = blocks.iter().map(|b| b.data.len() as u64).sum();
+            let mut one =
+                ImpostorCell::begin_upload(&gpu, materials.clone(), prepare()).expect("begin");
+            one.upload_step(&gpu, u64::MAX).expect("upload");
+            let one = one.finish().expect("finish");
+            assert!(one.texture_format().is_compressed());
+            assert_eq!(one.texture_bytes(), total);
+            let per_block = format.block_bytes() as u64;
+            assert_eq!(
+                one.resident_texture_bytes() * 64 / per_block,
+                rgba_cell.resident_texture_bytes(),
+                "{format:?}: 16 texels of 4 bytes against a block"
+            );
+            let want = r.render(&one, &view, &opts).expect("render");
+            // the same blocks decoded on the CPU: the same coverage, colours close
+            let cpu =
+                ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &decoded)
+                    .expect("decoded upload");
+            let cpu = r.render(&cpu, &view, &opts).expect("render decoded");
+            assert!(want.covered_count() > 1000);
+            assert_eq!(
+                want.depth, cpu.depth,
+                "{format:?}: the alpha test passes the same texels"
+            );
+            let worst = want
+                .rgba
+                .iter()
+                .zip(&cpu.rgba)
+                .map(|(a, b)| a.abs_diff(*b))
+                .max();
+            assert!(
+                worst <= Some(3),
+                "{format:?}: GPU and CPU decoding differ by {worst:?}"
+            );
+            for budget in [0u64, 1, 100, 1000] {
+                let mut pending =
+                    ImpostorCell::begin_upload(&gpu, materials.clone(), prepare()).expect("begin");
+                let mut steps = 0;
+                while !pending.upload_step(&gpu, budget).expect("step") {
+                    steps += 1;
+                    assert!(steps < 10_000);
+                }
+                assert_eq!(pending.uploaded_bytes(), total);
+                assert_eq!(pending.cpu_bytes(), 0);
+                let cell = pending.finish().expect("finish");
+                assert_eq!(cell.gpu_bytes(), one.gpu_bytes());
+                let got = r.render(&cell, &view, &opts).expect("render");
+                assert!(
+                    got == want,
+                    "{format:?} budget {budget}: renders differently"
+                );
+            }
+        }
+        // blocks of other sizes than the prepared macro-textures are refused
+        let data =
+            ImpostorCellData::prepare(&scene, &near, &[], vec![pattern(8, 8, 0)]).expect("prep");
+        let wrong = BlockMacro {
+            format: BlockFormat::Bc1,
+            width: 4,
+            height: 8,
+            data: vec![0; 16],
+        };
+        assert!(matches!(
+            data.with_blocks(vec![wrong]),
+            Err(GpuError::Invalid(_))
+        ));
+    }
 
     #[test]
     fn incremental_upload_renders_like_the_one_shot_upload() {
