@@ -331,6 +331,7 @@ fn gap_fill_rejects_mixed_resolutions() {
         rgba: vec![0; 3],
         border: vec![false; 16],
         far_border: vec![false; 16],
+        content: lemi_core::compress::TexelRect::full(4),
     }];
     assert!(matches!(
         fill_gaps(&mut bad, GapSources::default()),

@@ -33,7 +33,7 @@ use lemi_core::parallax_error::LayerDepths;
 use lemi_core::{Face, Scene};
 use rayon::prelude::*;
 
-use crate::recorder::Coverage;
+use crate::recorder::{Coverage, RecordOptions};
 use crate::{Gpu, GpuError, GpuMaterials, LayerRecorder, Lighting, MaterialRun};
 
 /// How the layers of a layering are recorded and compressed.
@@ -100,6 +100,18 @@ pub struct RecordedLayers {
     pub clip_seconds: f64,
 }
 
+/// What [`CellRecorder::record_face`] produced for one face.
+pub struct RecordedFace {
+    /// The face's layer images (no images with `depths_only`).
+    pub layers: FaceLayers,
+    /// Per layer, the per-texel depth along the face axis (only with `depths_only`).
+    pub depths: Vec<Vec<f32>>,
+    pub opaque_recorded: u64,
+    /// Texels added to the innermost layer by [`close_near_seam`].
+    pub near_seam_texels: u64,
+    pub clip_seconds: f64,
+}
+
 /// What recording needs once per scene: the scene, its triangles' bounds, its materials on the
 /// GPU and the layer recorder.
 pub struct CellRecorder<'a> {
@@ -109,6 +121,9 @@ pub struct CellRecorder<'a> {
     tris: TriangleBounds,
     materials: Arc<GpuMaterials>,
     recorder: LayerRecorder,
+    /// Read back only the tiles a slab's triangles touch ([`RecordOptions::sparse`]; on by
+    /// default, the layers are the same either way).
+    pub sparse: bool,
 }
 
 /// The clipped triangles of one slab and their material runs.
@@ -138,7 +153,13 @@ impl<'a> CellRecorder<'a> {
             tris: TriangleBounds::new(scene),
             materials,
             recorder,
+            sparse: true,
         })
+    }
+
+    /// Texels read back from the GPU so far ([`LayerRecorder::texels_read`]).
+    pub fn texels_read(&self) -> u64 {
+        self.recorder.texels_read()
     }
 
     /// The layers of `cell` and what each records, for these parameters and this scene.
@@ -180,7 +201,8 @@ impl<'a> CellRecorder<'a> {
 
     /// Clips and records every (face, layer) of a cell: the layer images with clip-border flags
     /// (or, with `depths_only`, only the per-texel depths). `on_layer(face, layer, layers)` is
-    /// told before each layer is recorded.
+    /// told before each layer is recorded. A bake that compresses face by face calls
+    /// [`CellRecorder::record_face`] instead and holds one face's images at a time.
     pub fn record_layers(
         &self,
         cell: &ViewCell,
@@ -189,10 +211,6 @@ impl<'a> CellRecorder<'a> {
         depths_only: bool,
         on_layer: &mut dyn FnMut(Face, usize, usize),
     ) -> Result<RecordedLayers, RecordError> {
-        let center = cell.center;
-        let res = self.params.resolution;
-        let near_field = plan.near_field;
-        let recording = Recording::of(self.params.layering);
         let mut out = RecordedLayers {
             faces: Vec::new(),
             depths: Vec::new(),
@@ -200,104 +218,149 @@ impl<'a> CellRecorder<'a> {
             near_seam_texels: 0,
             clip_seconds: 0.0,
         };
-        for (slot, face_plan) in plan.faces.iter().enumerate() {
-            let face = face_plan.face;
-            let placement = &face_plan.placement;
-            let slabs = &face_plan.slabs;
-            let n = placement.layers.len();
-            // clip every slab of this face on the CPU, in parallel (to the depth range the layer
-            // records: its slab, or for overlapping slabs the extended range)
-            let t = Instant::now();
-            let prepared: Vec<Slab> = (0..n)
-                .into_par_iter()
-                .map(|k| {
-                    self.prepare_slab(&class.bins[slot][k], center, face, slabs.lo(k), slabs.hi(k))
-                })
-                .collect();
-            out.clip_seconds += t.elapsed().as_secs_f64();
-            let mut images = Vec::with_capacity(n);
-            let mut depths = Vec::with_capacity(n);
-            for (k, slab) in prepared.into_iter().enumerate() {
-                on_layer(face, k, n);
-                let (lo, hi) = (slabs.lo(k), slabs.hi(k));
-                let near_plane = 0.5 * lo.min(near_field);
-                let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
-                let frame = self
-                    .recorder
-                    .record_with(
-                        &self.materials,
-                        DVec3::ZERO,
-                        face,
-                        &slab.vertices,
-                        &slab.runs,
-                        near_plane,
-                        &self.lighting,
-                        recording.coverage,
-                        &planes,
-                    )
-                    .map_err(|source| RecordError::Gpu {
-                        cell: cell.id(),
-                        face,
-                        layer: Some(k),
-                        source,
-                    })?;
-                if depths_only {
-                    depths.push(frame.depth);
-                    continue;
-                }
-                let mut border = vec![false; (res * res) as usize];
-                let mut far_border = vec![false; (res * res) as usize];
-                if recording.crack_free {
-                    if lo.is_finite() {
-                        mark_clip_borders(&slab.vertices, face, &[lo], res, &mut border);
-                    }
-                    if hi.is_finite() {
-                        mark_clip_borders(&slab.vertices, face, &[hi], res, &mut far_border);
-                    }
-                }
-                let image = LayerImage::from_parts(res, frame.rgba, border, far_border).map_err(
-                    |source| RecordError::Image {
-                        cell: cell.id(),
-                        face,
-                        layer: k,
-                        source,
-                    },
-                )?;
-                out.opaque_recorded += image.opaque_count();
-                images.push(image);
-            }
+        for slot in 0..plan.faces.len() {
+            let face = self.record_face(cell, plan, class, slot, depths_only, on_layer)?;
+            out.opaque_recorded += face.opaque_recorded;
+            out.near_seam_texels += face.near_seam_texels;
+            out.clip_seconds += face.clip_seconds;
             if depths_only {
-                out.depths.push(depths);
+                out.depths.push(face.depths);
             } else {
-                if let Some(inner) = images.last_mut().filter(|_| recording.crack_free) {
-                    let along = cell.half.abs().dot(face.forward().abs());
-                    let near = self.prepare_slab(&class.near, center, face, along, near_field);
-                    let frame = self
-                        .recorder
-                        .record(
-                            &self.materials,
-                            DVec3::ZERO,
-                            face,
-                            &near.vertices,
-                            &near.runs,
-                            0.5 * along.max(1e-3),
-                            &self.lighting,
-                        )
-                        .map_err(|source| RecordError::Gpu {
-                            cell: cell.id(),
-                            face,
-                            layer: None,
-                            source,
-                        })?;
-                    out.near_seam_texels += close_near_seam(inner, &frame.rgba);
-                }
-                out.faces.push(FaceLayers {
-                    face,
-                    distances: placement.layers.iter().map(|l| l.distance).collect(),
-                    layers: images,
-                });
+                out.faces.push(face.layers);
             }
         }
+        Ok(out)
+    }
+
+    /// Clips and records the layers of the face in slot `slot` of `plan` (see
+    /// [`CellRecorder::record_layers`]).
+    pub fn record_face(
+        &self,
+        cell: &ViewCell,
+        plan: &CellPlan,
+        class: &Classification,
+        slot: usize,
+        depths_only: bool,
+        on_layer: &mut dyn FnMut(Face, usize, usize),
+    ) -> Result<RecordedFace, RecordError> {
+        let center = cell.center;
+        let res = self.params.resolution;
+        let near_field = plan.near_field;
+        let recording = Recording::of(self.params.layering);
+        let face_plan = &plan.faces[slot];
+        let face = face_plan.face;
+        let placement = &face_plan.placement;
+        let slabs = &face_plan.slabs;
+        let n = placement.layers.len();
+        let mut out = RecordedFace {
+            layers: FaceLayers {
+                face,
+                distances: placement.layers.iter().map(|l| l.distance).collect(),
+                layers: Vec::new(),
+            },
+            depths: Vec::new(),
+            opaque_recorded: 0,
+            near_seam_texels: 0,
+            clip_seconds: 0.0,
+        };
+        // clip every slab of this face on the CPU, in parallel (to the depth range the layer
+        // records: its slab, or for overlapping slabs the extended range)
+        let t = Instant::now();
+        let prepared: Vec<Slab> = (0..n)
+            .into_par_iter()
+            .map(|k| {
+                self.prepare_slab(&class.bins[slot][k], center, face, slabs.lo(k), slabs.hi(k))
+            })
+            .collect();
+        out.clip_seconds += t.elapsed().as_secs_f64();
+        let mut images = Vec::with_capacity(n);
+        let mut depths = Vec::with_capacity(n);
+        for (k, slab) in prepared.into_iter().enumerate() {
+            on_layer(face, k, n);
+            let (lo, hi) = (slabs.lo(k), slabs.hi(k));
+            let near_plane = 0.5 * lo.min(near_field);
+            let planes: Vec<f64> = [lo, hi].into_iter().filter(|p| p.is_finite()).collect();
+            let frame = self
+                .recorder
+                .record_with(
+                    &self.materials,
+                    DVec3::ZERO,
+                    face,
+                    &slab.vertices,
+                    &slab.runs,
+                    near_plane,
+                    &self.lighting,
+                    &RecordOptions {
+                        coverage: recording.coverage,
+                        clip_planes: &planes,
+                        depth: depths_only,
+                        sparse: self.sparse,
+                    },
+                )
+                .map_err(|source| RecordError::Gpu {
+                    cell: cell.id(),
+                    face,
+                    layer: Some(k),
+                    source,
+                })?;
+            if depths_only {
+                depths.push(frame.depth);
+                continue;
+            }
+            let mut border = vec![false; (res * res) as usize];
+            let mut far_border = vec![false; (res * res) as usize];
+            if recording.crack_free {
+                if lo.is_finite() {
+                    mark_clip_borders(&slab.vertices, face, &[lo], res, &mut border);
+                }
+                if hi.is_finite() {
+                    mark_clip_borders(&slab.vertices, face, &[hi], res, &mut far_border);
+                }
+            }
+            let content = frame.content;
+            let image = LayerImage::from_parts(res, frame.rgba, border, far_border)
+                .map(|image| image.with_content(content))
+                .map_err(|source| RecordError::Image {
+                    cell: cell.id(),
+                    face,
+                    layer: k,
+                    source,
+                })?;
+            out.opaque_recorded += image.opaque_count();
+            images.push(image);
+        }
+        if depths_only {
+            out.depths = depths;
+            return Ok(out);
+        }
+        if let Some(inner) = images.last_mut().filter(|_| recording.crack_free) {
+            let along = cell.half.abs().dot(face.forward().abs());
+            let near = self.prepare_slab(&class.near, center, face, along, near_field);
+            let frame = self
+                .recorder
+                .record_with(
+                    &self.materials,
+                    DVec3::ZERO,
+                    face,
+                    &near.vertices,
+                    &near.runs,
+                    0.5 * along.max(1e-3),
+                    &self.lighting,
+                    &RecordOptions {
+                        depth: false,
+                        sparse: self.sparse,
+                        ..Default::default()
+                    },
+                )
+                .map_err(|source| RecordError::Gpu {
+                    cell: cell.id(),
+                    face,
+                    layer: None,
+                    source,
+                })?;
+            out.near_seam_texels += close_near_seam(inner, &frame.rgba);
+        }
+        out.layers.layers = images;
         Ok(out)
     }
 

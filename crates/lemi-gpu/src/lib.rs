@@ -37,14 +37,14 @@ mod surface;
 mod targets;
 pub mod texture;
 
-pub use cell_recorder::{CellRecorder, RecordError, Recording};
+pub use cell_recorder::{CellRecorder, RecordError, RecordedFace, Recording};
 pub use culled::{CullOptions, CullStats, CulledGeometry, GpuCulledScene};
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
 pub use impostor::{
     ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, DEFAULT_PAGE_SIDE,
     QUAD_ALPHA_CUTOFF,
 };
-pub use recorder::{LayerFrame, LayerRecorder, MaterialRun};
+pub use recorder::{LayerFrame, LayerRecorder, MaterialRun, RecordOptions};
 pub use renderer::{
     padded_bytes_per_row, Frame, RenderOptions, Renderer, COLOR_FORMAT, DEPTH_FORMAT,
     VIEW_DEPTH_FORMAT,

@@ -29,6 +29,7 @@
 //! triangle) is pushed back by a relative 2⁻¹⁶ in the depth buffer, so along a shared edge the
 //! triangle containing the texel centre wins, as in the reference renderer.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use bytemuck::{Pod, Zeroable};
@@ -43,6 +44,7 @@ use crate::renderer::{COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
 use crate::shading::{Lighting, ShadingGlobals, SHADING_WGSL};
 use crate::targets::Targets;
 use crate::{Gpu, GpuError, GpuMaterials};
+use lemi_core::compress::TexelRect;
 
 const RECORDER_WGSL: &str = include_str!("recorder.wgsl");
 
@@ -75,14 +77,47 @@ pub enum Coverage {
     ClipEdges,
 }
 
+/// How [`LayerRecorder::record_with`] records and what it reads back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordOptions<'a> {
+    pub coverage: Coverage,
+    /// The depths along the face axis (relative to the centre) of the slab's borders, whose
+    /// clipping edges [`Coverage::ClipEdges`] covers conservatively (ignored by the other modes).
+    pub clip_planes: &'a [f64],
+    /// Read back the per-texel depth too ([`LayerFrame::depth`]); the bake needs only colour.
+    pub depth: bool,
+    /// Read back only the tiles of [`READBACK_TILE`]² texels that the triangles' grown bounding
+    /// boxes touch (every other texel is known to be empty), and neither draw nor read back
+    /// anything for a slab without triangles. `false` reads back the whole layer.
+    pub sparse: bool,
+}
+
+impl Default for RecordOptions<'_> {
+    fn default() -> Self {
+        RecordOptions {
+            coverage: Coverage::Conservative,
+            clip_planes: &[],
+            depth: true,
+            sparse: true,
+        }
+    }
+}
+
+/// Side in texels of the tiles that sparse recording reads back ([`RecordOptions::sparse`]).
+pub const READBACK_TILE: u32 = 64;
+
 /// One recorded layer, rows top to bottom in the texel convention of [`lemi_core::face`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LayerFrame {
     pub res: u32,
     /// sRGB-encoded RGBA8; alpha 255 where covered, `[0, 0, 0, 0]` elsewhere.
     pub rgba: Vec<u8>,
-    /// Linear depth along the face axis; `f32::INFINITY` where not covered.
+    /// Linear depth along the face axis; `f32::INFINITY` where not covered. Empty when the
+    /// recording did not ask for depth ([`RecordOptions::depth`]).
     pub depth: Vec<f32>,
+    /// Every texel outside this rectangle is uncovered: the bounding box of the tiles read back
+    /// ([`RecordOptions::sparse`]), the whole layer otherwise.
+    pub content: TexelRect,
 }
 
 impl LayerFrame {
@@ -148,6 +183,8 @@ pub struct LayerRecorder {
     globals_group: wgpu::BindGroup,
     res: u32,
     targets: Mutex<Targets>,
+    /// Texels read back from the GPU so far (colour; depth reads the same texels again).
+    texels_read: AtomicU64,
 }
 
 impl LayerRecorder {
@@ -239,6 +276,7 @@ impl LayerRecorder {
                 globals_group,
                 res,
                 targets: Mutex::new(Targets::new(device, res, res, "lemi layer")),
+                texels_read: AtomicU64::new(0),
             }
         })
     }
@@ -246,6 +284,12 @@ impl LayerRecorder {
     /// The layer resolution.
     pub fn res(&self) -> u32 {
         self.res
+    }
+
+    /// Texels read back from the GPU by this recorder so far (a layer read back whole counts
+    /// `res²`; sparse recording counts the tiles it read, [`RecordOptions::sparse`]).
+    pub fn texels_read(&self) -> u64 {
+        self.texels_read.load(Ordering::Relaxed)
     }
 
     /// Records `triangles` (three vertices each, positions relative to `center`, already clipped to
@@ -270,14 +314,12 @@ impl LayerRecorder {
             runs,
             near,
             lighting,
-            Coverage::Conservative,
-            &[],
+            &RecordOptions::default(),
         )
     }
 
-    /// [`LayerRecorder::record`] with a choice of [`Coverage`]; `clip_planes` are the depths
-    /// along the face axis (relative to `center`) of the slab's borders, whose clipping edges
-    /// [`Coverage::ClipEdges`] covers conservatively (ignored by the other modes).
+    /// [`LayerRecorder::record`] with a choice of coverage, readback and depth
+    /// ([`RecordOptions`]).
     #[allow(clippy::too_many_arguments)]
     pub fn record_with(
         &self,
@@ -288,9 +330,9 @@ impl LayerRecorder {
         runs: &[MaterialRun],
         near: f64,
         lighting: &Lighting,
-        coverage: Coverage,
-        clip_planes: &[f64],
+        options: &RecordOptions,
     ) -> Result<LayerFrame, GpuError> {
+        let coverage = options.coverage;
         if !center.is_finite() {
             return Err(GpuError::Invalid(format!(
                 "layer centre must be finite, got {center:?}"
@@ -343,9 +385,29 @@ impl LayerRecorder {
             Coverage::ClipEdges => 2.0,
         };
         let planes = if coverage == Coverage::ClipEdges {
-            clip_planes
+            options.clip_planes
         } else {
             &[]
+        };
+        let n = self.res as usize * self.res as usize;
+        let drawn = runs.iter().map(|r| r.count as usize).sum::<usize>() > 0;
+        if options.sparse && !drawn {
+            // nothing is drawn: the layer is empty, no pass and no readback
+            return Ok(LayerFrame {
+                res: self.res,
+                rgba: vec![0; 4 * n],
+                depth: if options.depth {
+                    vec![f32::INFINITY; n]
+                } else {
+                    Vec::new()
+                },
+                content: TexelRect::empty(),
+            });
+        }
+        let rects = if options.sparse {
+            touched_tiles(triangles, runs, face, self.res)
+        } else {
+            vec![TexelRect::full(self.res)]
         };
         let vertices = rec_vertices(triangles, face, planes);
         let targets = self
@@ -382,24 +444,122 @@ impl LayerRecorder {
                     }
                 }
             }
-            targets.copy_to_readback(&mut encoder);
+            targets.copy_rects_to_readback(&mut encoder, &rects, options.depth);
             self.queue.submit([encoder.finish()]);
         })?;
-        let (mut rgba, mut depth) = targets.read(&self.device)?;
-        for (px, d) in rgba.chunks_exact_mut(4).zip(depth.iter_mut()) {
-            if px[3] == 0 {
-                px.copy_from_slice(&[0; 4]);
+        let read = targets.read_rects(&self.device, &rects, options.depth)?;
+        self.texels_read.fetch_add(read.texels, Ordering::Relaxed);
+        let (mut rgba, depth) = (read.rgba, read.depth);
+        // binary alpha; uncovered texels transparent black at infinite depth (texels outside
+        // the rectangles were never drawn: already transparent black)
+        let mut depth = depth.unwrap_or_default();
+        let res = self.res as usize;
+        for r in &rects {
+            for y in r.y0 as usize..r.y1 as usize {
+                for x in r.x0 as usize..r.x1 as usize {
+                    let k = y * res + x;
+                    let px = &mut rgba[4 * k..4 * k + 4];
+                    if px[3] == 0 {
+                        px.copy_from_slice(&[0; 4]);
+                        if let Some(d) = depth.get_mut(k) {
+                            *d = f32::INFINITY;
+                        }
+                    } else {
+                        px[3] = 255;
+                    }
+                }
+            }
+        }
+        if options.depth && options.sparse {
+            // texels outside every rectangle: not covered
+            let mut inside = vec![false; n];
+            for r in &rects {
+                for y in r.y0 as usize..r.y1 as usize {
+                    inside[y * res + r.x0 as usize..y * res + r.x1 as usize].fill(true);
+                }
+            }
+            for (d, _) in depth.iter_mut().zip(&inside).filter(|(_, &i)| !i) {
                 *d = f32::INFINITY;
-            } else {
-                px[3] = 255;
             }
         }
         Ok(LayerFrame {
             res: self.res,
             rgba,
             depth,
+            content: rects.iter().fold(TexelRect::empty(), |a, r| a.union(r)),
         })
     }
+}
+
+/// The tiles of [`READBACK_TILE`]² texels (clamped to the layer) that the triangles of `runs`
+/// can write, as one rectangle per run of adjacent tiles in a tile row: a triangle writes only
+/// texels within its projected bounding box grown by the conservative dilation (half a texel
+/// diagonal, [`Coverage::Conservative`]); two texels of margin cover that and rounding. A triangle
+/// with a corner not in front of the face (none after clipping to a slab) touches everything.
+fn touched_tiles(
+    triangles: &[ClipVertex],
+    runs: &[MaterialRun],
+    face: Face,
+    res: u32,
+) -> Vec<TexelRect> {
+    let tiles = res.div_ceil(READBACK_TILE) as usize;
+    let mut touched = vec![false; tiles * tiles];
+    let scale = 0.5 * res as f64;
+    'tris: for r in runs {
+        let (a, b) = (r.first as usize, (r.first + r.count) as usize);
+        for tri in triangles.get(3 * a..3 * b).unwrap_or(&[]).chunks_exact(3) {
+            let (mut lo, mut hi) = (
+                glam::DVec2::splat(f64::INFINITY),
+                glam::DVec2::splat(-f64::INFINITY),
+            );
+            for v in tri {
+                let Some((s, t, _)) = face.project(v.rel) else {
+                    touched.fill(true);
+                    break 'tris;
+                };
+                let p = glam::DVec2::new((s + 1.0) * scale, (t + 1.0) * scale);
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+            let lo = (lo - 2.0).max(glam::DVec2::ZERO);
+            let hi = (hi + 2.0).min(glam::DVec2::splat(res as f64));
+            if !(lo.x < hi.x && lo.y < hi.y) {
+                continue;
+            }
+            let t = READBACK_TILE as f64;
+            let (tx0, ty0) = ((lo.x / t) as usize, (lo.y / t) as usize);
+            let (tx1, ty1) = (
+                ((hi.x / t).ceil() as usize).min(tiles),
+                ((hi.y / t).ceil() as usize).min(tiles),
+            );
+            for ty in ty0..ty1 {
+                touched[ty * tiles + tx0..ty * tiles + tx1].fill(true);
+            }
+        }
+    }
+    let mut rects = Vec::new();
+    for ty in 0..tiles {
+        let row = &touched[ty * tiles..(ty + 1) * tiles];
+        let mut tx = 0;
+        while tx < tiles {
+            if !row[tx] {
+                tx += 1;
+                continue;
+            }
+            let start = tx;
+            while tx < tiles && row[tx] {
+                tx += 1;
+            }
+            let edge = |k: usize| (k as u32 * READBACK_TILE).min(res);
+            rects.push(TexelRect {
+                x0: edge(start),
+                y0: edge(ty),
+                x1: edge(tx),
+                y1: edge(ty + 1),
+            });
+        }
+    }
+    rects
 }
 
 /// The non-indexed vertex stream: each vertex with its whole triangle, positions in f32 relative to
@@ -524,7 +684,12 @@ mod tests {
                 count: 1,
             }];
             let rec_with = |c, planes: &[f64]| {
-                rec.record_with(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l, c, planes)
+                let options = RecordOptions {
+                    coverage: c,
+                    clip_planes: planes,
+                    ..Default::default()
+                };
+                rec.record_with(&mats, DVec3::ZERO, face, &tri, &runs, 0.1, &l, &options)
                     .expect("record")
             };
             let cons = rec_with(Coverage::Conservative, &[plane]);

@@ -14,6 +14,7 @@ use crate::renderer::{
     padded_bytes_per_row, Frame, GpuTime, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
 };
 use crate::GpuError;
+use lemi_core::compress::TexelRect;
 
 /// The colour texture's second view format: the same bytes without sRGB encoding.
 pub(crate) const LINEAR_COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -27,6 +28,15 @@ pub(crate) enum PassPart {
     First,
     /// The second of two passes: load, draw, keep colour and view depth.
     Last,
+}
+
+/// What [`Targets::read_rects`] read: whole images, the texels of the rectangles filled in.
+pub(crate) struct RectReadback {
+    pub rgba: Vec<u8>,
+    /// f32 view depth as stored, when asked for.
+    pub depth: Option<Vec<f32>>,
+    /// Texels read (the rectangles' area).
+    pub texels: u64,
 }
 
 /// Whether a colour texture on `device` can be rendered through an `Rgba8Unorm` view as well as
@@ -221,31 +231,63 @@ impl Targets {
 
     /// Copies colour and view depth into the readback buffers (after the pass).
     pub(crate) fn copy_to_readback(&self, encoder: &mut wgpu::CommandEncoder) {
-        for (texture, buffer) in [
+        self.copy_rects_to_readback(encoder, &[self.whole()], true);
+    }
+
+    /// The whole target as one rectangle.
+    pub(crate) fn whole(&self) -> TexelRect {
+        TexelRect {
+            x0: 0,
+            y0: 0,
+            x1: self.width,
+            y1: self.height,
+        }
+    }
+
+    /// Copies the rectangles `rects` of the colour (and, with `depth`, the view depth) into the
+    /// readback buffers, each where a copy of the whole image would put it, so that
+    /// [`Targets::read_rects`] finds them at their rows and columns. Rectangles must lie inside
+    /// the target.
+    pub(crate) fn copy_rects_to_readback(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        rects: &[TexelRect],
+        depth: bool,
+    ) {
+        let padded = padded_bytes_per_row(self.width, 4);
+        let targets = [
             (&self.color_texture, &self.color_readback),
             (&self.view_depth_texture, &self.depth_readback),
-        ] {
-            encoder.copy_texture_to_buffer(
-                wgpu::TexelCopyTextureInfo {
-                    texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                wgpu::TexelCopyBufferInfo {
-                    buffer,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(padded_bytes_per_row(self.width, 4)),
-                        rows_per_image: Some(self.height),
+        ];
+        for (texture, buffer) in targets.into_iter().take(if depth { 2 } else { 1 }) {
+            for r in rects.iter().filter(|r| !r.is_empty()) {
+                encoder.copy_texture_to_buffer(
+                    wgpu::TexelCopyTextureInfo {
+                        texture,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d {
+                            x: r.x0,
+                            y: r.y0,
+                            z: 0,
+                        },
+                        aspect: wgpu::TextureAspect::All,
                     },
-                },
-                wgpu::Extent3d {
-                    width: self.width,
-                    height: self.height,
-                    depth_or_array_layers: 1,
-                },
-            );
+                    wgpu::TexelCopyBufferInfo {
+                        buffer,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            // a multiple of the 4-byte texel, as copies require
+                            offset: r.y0 as u64 * padded as u64 + 4 * r.x0 as u64,
+                            bytes_per_row: Some(padded),
+                            rows_per_image: Some(r.y1 - r.y0),
+                        },
+                    },
+                    wgpu::Extent3d {
+                        width: r.x1 - r.x0,
+                        height: r.y1 - r.y0,
+                        depth_or_array_layers: 1,
+                    },
+                );
+            }
         }
     }
 
@@ -258,19 +300,75 @@ impl Targets {
         }
     }
 
-    /// Reads back the colour (RGBA8, as rendered) and the view depth (f32) after submission.
-    pub(crate) fn read(&self, device: &wgpu::Device) -> Result<(Vec<u8>, Vec<f32>), GpuError> {
-        map_all(device, &[&self.color_readback, &self.depth_readback])?;
-        let rgba = unpad_rows(&self.color_readback, self.width, self.height);
-        let depth = unpad_rows(&self.depth_readback, self.width, self.height);
-        self.color_readback.unmap();
-        self.depth_readback.unmap();
-        let rgba = rgba?;
-        let depth = depth?
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    /// Reads back, after a submission that copied `rects` ([`Targets::copy_rects_to_readback`]),
+    /// the colour (RGBA8, as rendered) and, with `depth`, the view depth (f32 bits as stored) of
+    /// those rectangles into whole-image buffers: texels outside every rectangle are `[0; 4]` and
+    /// depth 0, as after the pass's clear. Returns the images and the number of texels read.
+    pub(crate) fn read_rects(
+        &self,
+        device: &wgpu::Device,
+        rects: &[TexelRect],
+        depth: bool,
+    ) -> Result<RectReadback, GpuError> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        // zeroed allocations: the pages of texels no rectangle covers are never written
+        let mut rgba = vec![0u8; 4 * w * h];
+        let mut depths = depth.then(|| vec![0f32; w * h]);
+        if rects.iter().all(TexelRect::is_empty) {
+            return Ok(RectReadback {
+                rgba,
+                depth: depths,
+                texels: 0,
+            });
+        }
+        let buffers: Vec<&wgpu::Buffer> = [&self.color_readback, &self.depth_readback]
+            .into_iter()
+            .take(if depth { 2 } else { 1 })
             .collect();
-        Ok((rgba, depth))
+        map_all(device, &buffers)?;
+        let result = (|| -> Result<u64, GpuError> {
+            let padded = padded_bytes_per_row(self.width, 4) as usize;
+            let colour = self
+                .color_readback
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            let mut read = 0u64;
+            for r in rects.iter().filter(|r| !r.is_empty()) {
+                let (x0, x1) = (r.x0 as usize, r.x1 as usize);
+                for y in r.y0 as usize..r.y1 as usize {
+                    rgba[4 * (y * w + x0)..4 * (y * w + x1)]
+                        .copy_from_slice(&colour[y * padded + 4 * x0..y * padded + 4 * x1]);
+                }
+                read += r.texels();
+            }
+            if let Some(depths) = depths.as_mut() {
+                let bytes = self
+                    .depth_readback
+                    .get_mapped_range(..)
+                    .map_err(|e| GpuError::Readback(e.to_string()))?;
+                for r in rects.iter().filter(|r| !r.is_empty()) {
+                    let (x0, x1) = (r.x0 as usize, r.x1 as usize);
+                    for y in r.y0 as usize..r.y1 as usize {
+                        let src = &bytes[y * padded + 4 * x0..y * padded + 4 * x1];
+                        for (d, b) in depths[y * w + x0..y * w + x1]
+                            .iter_mut()
+                            .zip(src.chunks_exact(4))
+                        {
+                            *d = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                        }
+                    }
+                }
+            }
+            Ok(read)
+        })();
+        for b in buffers {
+            b.unmap();
+        }
+        Ok(RectReadback {
+            rgba,
+            depth: depths,
+            texels: result?,
+        })
     }
 
     /// Reads back a [`Frame`] after submission: colour and view depth, with pixels no fragment was
@@ -457,18 +555,4 @@ fn map_all(device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> Result<(), GpuEr
             .map_err(|e| GpuError::Readback(e.to_string()))?;
     }
     Ok(())
-}
-
-/// The rows of a mapped readback buffer of `width × height` 4-byte texels, padding stripped.
-fn unpad_rows(buffer: &wgpu::Buffer, width: u32, height: u32) -> Result<Vec<u8>, GpuError> {
-    let padded = padded_bytes_per_row(width, 4) as usize;
-    let row = width as usize * 4;
-    let view = buffer
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let mut out = Vec::with_capacity(row * height as usize);
-    for r in view.chunks(padded).take(height as usize) {
-        out.extend_from_slice(&r[..row]);
-    }
-    Ok(out)
 }

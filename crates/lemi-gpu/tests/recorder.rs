@@ -9,8 +9,8 @@ use lemi_core::camera::View;
 use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::{Face, Material, Mesh, SceneBuilder, Texture};
 use lemi_gpu::{
-    GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RenderOptions,
-    Renderer, UploadOptions,
+    GpuMaterials, GpuScene, LayerFrame, LayerRecorder, Lighting, MaterialRun, RecordOptions,
+    RenderOptions, Renderer, UploadOptions,
 };
 use lemi_testkit::{clip_vertex as cv, gpu, one_run as all_runs, wavy_surface, white_materials};
 
@@ -476,4 +476,66 @@ fn bad_runs_and_parameters_are_errors() {
         .expect("empty layer");
     assert_eq!(empty.covered_count(), 0);
     assert!(empty.depth.iter().all(|d| d.is_infinite()));
+}
+
+/// Sparse recording (the default, `RecordOptions::sparse`): a slab without triangles draws
+/// nothing and reads nothing back; a small triangle reads back only the tiles around it
+/// (`READBACK_TILE`² texels each), and the layer equals the one read back whole, depths
+/// included; the frame's content rectangle holds every covered texel.
+#[test]
+fn a_slab_without_triangles_costs_no_readback() {
+    let Some(gpu) = gpu() else { return };
+    let res = 256;
+    let rec = LayerRecorder::new(&gpu, res).expect("recorder");
+    let mats = white_materials(&gpu);
+    let l = Lighting::default();
+    let c = DVec3::ZERO;
+    let empty = rec
+        .record(&mats, c, Face::PosZ, &[], &[], 0.1, &l)
+        .expect("empty layer");
+    assert_eq!(rec.texels_read(), 0, "an empty slab reads nothing back");
+    assert_eq!(empty.covered_count(), 0);
+    assert!(empty.content.is_empty());
+    // a small triangle near the centre of the face
+    let tri = [
+        cv(DVec3::new(0.01, 0.01, 5.0), [0.0, 0.0, -1.0]),
+        cv(DVec3::new(0.2, 0.02, 5.0), [0.0, 0.0, -1.0]),
+        cv(DVec3::new(0.05, 0.3, 5.0), [0.0, 0.0, -1.0]),
+    ];
+    let runs = all_runs(&tri);
+    let sparse = rec
+        .record(&mats, c, Face::PosZ, &tri, &runs, 0.1, &l)
+        .expect("sparse");
+    let read = rec.texels_read();
+    let tile = lemi_gpu::recorder::READBACK_TILE as u64;
+    assert!(
+        read > 0 && read <= 4 * tile * tile,
+        "{read} texels read for a triangle within a few tiles"
+    );
+    let full = rec
+        .record_with(
+            &mats,
+            c,
+            Face::PosZ,
+            &tri,
+            &runs,
+            0.1,
+            &l,
+            &RecordOptions {
+                sparse: false,
+                ..Default::default()
+            },
+        )
+        .expect("full");
+    assert_eq!(rec.texels_read() - read, res as u64 * res as u64);
+    assert!(sparse.covered_count() > 0);
+    assert_eq!(sparse.rgba, full.rgba);
+    assert_eq!(sparse.depth, full.depth);
+    for j in 0..res {
+        for i in 0..res {
+            if full.covered(i, j) {
+                assert!(sparse.content.contains(i, j), "covered ({i}, {j}) outside");
+            }
+        }
+    }
 }

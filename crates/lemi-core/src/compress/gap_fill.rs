@@ -41,8 +41,9 @@
 
 use rayon::prelude::*;
 
-use super::layer_image::{all3x3, any3x3, common_res, LayerImage};
+use super::layer_image::{all3x3_in, any3x3_in, common_res, LayerImage};
 use super::CompressError;
+use super::TexelRect;
 
 /// Which opaque border texels of the closer layer gap filling copies (see the module docs).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -93,15 +94,20 @@ struct Masks {
 
 fn masks(layer: &LayerImage) -> Masks {
     let opaque = layer.opaque_mask();
+    // (computed within the layer's content, and one texel around it for the neighbours)
     // all 8 in-image neighbours opaque (outside counts as opaque, i.e. is ignored)
-    let interior = all3x3(&opaque, layer.res, true);
+    let interior = all3x3_in(&opaque, layer.res, true, &layer.content);
     // some in-image neighbour opaque (outside counts as transparent, i.e. is ignored)
-    let near_opaque = any3x3(&opaque, layer.res, false);
-    let opaque_border = opaque
-        .iter()
-        .zip(&interior)
-        .map(|(&o, &i)| o && !i)
-        .collect();
+    let near_opaque = any3x3_in(
+        &opaque,
+        layer.res,
+        false,
+        &layer.content.grown(1, layer.res),
+    );
+    let mut opaque_border = vec![false; opaque.len()];
+    for i in layer.content_rows().flatten() {
+        opaque_border[i] = opaque[i] && !interior[i];
+    }
     let target = near_opaque; // opaque ⇒ near_opaque; transparent ∧ near_opaque = transparent border
     Masks {
         opaque_border,
@@ -141,7 +147,8 @@ pub fn plan_gap_fill(
             };
             let mut w = Vec::new();
             let far_border = &layers[k].far_border;
-            for (i, &b) in src.opaque_border.iter().enumerate() {
+            for i in layers[k].content_rows().flatten() {
+                let b = src.opaque_border[i];
                 if !b || (sources == GapSources::FarClipEdges && !far_border[i]) {
                     continue;
                 }
@@ -178,10 +185,15 @@ pub fn fill_gaps(
     if plan.writes.is_empty() {
         return Ok(plan.stats);
     }
+    let sources: Vec<TexelRect> = layers.iter().map(|l| l.content).collect();
     layers[1..]
         .par_iter_mut()
-        .zip(plan.writes.par_iter())
-        .for_each(|(layer, w)| {
+        .zip(plan.writes.par_iter().zip(&sources))
+        .for_each(|(layer, (w, src))| {
+            if !w.is_empty() {
+                // the copies lie within the closer layer's content
+                layer.include(src);
+            }
             for &(i, rgba) in w {
                 layer.set_texel(i, rgba);
             }
@@ -198,14 +210,15 @@ pub fn fill_gaps(
 /// same face projection) is opaque takes the near geometry's colour. The added texels are flagged
 /// as clip-border texels, so they never hide farther layers. Returns the number of texels added.
 pub fn close_near_seam(inner: &mut LayerImage, near: &[u8]) -> u64 {
-    let res = inner.res as usize;
     if near.len() != inner.rgba.len() {
         return 0;
     }
     let opaque = inner.opaque_mask();
-    let touches = super::layer_image::any3x3(&opaque, inner.res, false);
+    let around = inner.content.grown(1, inner.res);
+    let touches = any3x3_in(&opaque, inner.res, false, &around);
+    inner.include(&around);
     let mut added = 0;
-    for i in 0..res * res {
+    for i in inner.content_rows().flatten() {
         if !opaque[i] && touches[i] && near[4 * i + 3] >= 128 {
             let c = [near[4 * i], near[4 * i + 1], near[4 * i + 2], 255];
             inner.set_texel(i, c);

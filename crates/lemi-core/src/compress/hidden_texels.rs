@@ -24,8 +24,9 @@
 
 use rayon::prelude::*;
 
-use super::layer_image::{all3x3, common_res, LayerImage, OPAQUE_ALPHA};
+use super::layer_image::{all3x3_in, common_res, LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 use super::CompressError;
+use super::TexelRect;
 
 /// Parameters of hidden-texel removal.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -83,35 +84,42 @@ pub fn remove_hidden_texels(
     stats.opaque_before = layers.par_iter().map(|l| l.opaque_count()).sum();
     let n = layers[0].texel_count();
     let mut hidden = vec![false; n]; // the nearest layer is never hidden
+                                     // every hidden texel lies within this rectangle: the union of the nearer layers' content
+    let mut hidden_rect = TexelRect::empty();
     let count = layers.len();
     for (k, layer) in layers.iter_mut().enumerate() {
-        let next_hidden = if k + 1 < count {
-            // texels of layer k that occlude: hidden (interpreted as opaque) or opaque
-            let cover: Vec<bool> = layer
-                .rgba
-                .chunks_exact(4)
-                .zip(&layer.border)
-                .zip(&hidden)
-                .map(|((p, &b), &h)| {
-                    h || (p[3] >= OPAQUE_ALPHA && (options.clip_border_occludes || !b))
-                })
-                .collect();
-            all3x3(&cover, res, false)
+        let next = if k + 1 < count {
+            // texels of layer k that occlude: hidden (interpreted as opaque) or opaque; none
+            // outside the nearer layers' content and this layer's
+            let region = hidden_rect.union(&layer.content);
+            let mut cover = vec![false; n];
+            for i in region.rows(res).flatten() {
+                cover[i] = hidden[i]
+                    || (layer.rgba[4 * i + 3] >= OPAQUE_ALPHA
+                        && (options.clip_border_occludes || !layer.border[i]));
+            }
+            Some((all3x3_in(&cover, res, false, &region), region))
         } else {
-            Vec::new()
+            None
         };
         // erase layer k's hidden texels before going on to the next pair
-        for (i, &h) in hidden.iter().enumerate() {
-            if h {
+        for i in hidden_rect.rows(res).flatten() {
+            if hidden[i] {
                 stats.marked += 1;
                 if layer.is_opaque(i) {
                     stats.removed += 1;
                     stats.removed_per_layer[k] += 1;
                 }
-                layer.clear_texel(i);
+                // already empty texels are left alone (their pages need not be written)
+                if layer.texel(i) != TRANSPARENT || layer.border[i] || layer.far_border[i] {
+                    layer.clear_texel(i);
+                }
             }
         }
-        hidden = next_hidden;
+        if let Some((h, region)) = next {
+            hidden = h;
+            hidden_rect = region;
+        }
     }
     stats.opaque_after = stats.opaque_before - stats.removed;
     Ok(stats)

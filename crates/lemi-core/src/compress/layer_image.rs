@@ -8,7 +8,7 @@
 //! Alpha is binary: a texel is opaque when its alpha is at least [`OPAQUE_ALPHA`]. Texels are
 //! stored row-major, row 0 at the top of the face image (the convention of [`crate::face`]).
 
-use super::CompressError;
+use super::{CompressError, TexelRect};
 
 /// Smallest alpha value that counts as opaque (the recorder writes 0 or 255).
 pub const OPAQUE_ALPHA: u8 = 128;
@@ -31,6 +31,12 @@ pub struct LayerImage {
     /// surface continues into that layer. Gap filling copies only these (see
     /// [`super::gap_fill`]).
     pub far_border: Vec<bool>,
+    /// Every texel outside this rectangle is transparent black without clip-border flags, so
+    /// the stages need not look there: the layer recorder reads back only the tiles its slab's
+    /// triangles touch (GI 2002's layers are mostly empty at high resolution) and sets it to
+    /// their bounding box. The whole image unless said otherwise; a stage that writes a texel
+    /// outside it grows it first ([`LayerImage::include`]).
+    pub content: TexelRect,
 }
 
 impl LayerImage {
@@ -42,6 +48,7 @@ impl LayerImage {
             rgba: vec![0; 4 * n],
             border: vec![false; n],
             far_border: vec![false; n],
+            content: TexelRect::full(res),
         }
     }
 
@@ -58,17 +65,59 @@ impl LayerImage {
             rgba,
             border,
             far_border,
+            content: TexelRect::full(res),
         };
         image.validate()?;
-        for (b, f) in image.border.iter_mut().zip(&image.far_border) {
-            *b |= *f;
+        // writes only where a far-border flag is set: the pages of an empty layer stay untouched
+        for (b, _) in image
+            .border
+            .iter_mut()
+            .zip(&image.far_border)
+            .filter(|(_, &f)| f)
+        {
+            *b = true;
         }
         Ok(image)
+    }
+
+    /// The image with [`LayerImage::content`] narrowed to `content` (clamped to the image): the
+    /// caller knows every texel outside it to be transparent black without clip-border flags.
+    pub fn with_content(mut self, content: TexelRect) -> Self {
+        let c = TexelRect {
+            x0: content.x0.min(self.res),
+            y0: content.y0.min(self.res),
+            x1: content.x1.min(self.res),
+            y1: content.y1.min(self.res),
+        };
+        self.content = if c.is_empty() { TexelRect::empty() } else { c };
+        debug_assert!(
+            (0..self.texel_count()).all(|i| {
+                let (x, y) = (
+                    (i % self.res as usize) as u32,
+                    (i / self.res as usize) as u32,
+                );
+                self.content.contains(x, y)
+                    || (self.texel(i) == TRANSPARENT && !self.border[i] && !self.far_border[i])
+            }),
+            "a texel outside the content rectangle is not empty"
+        );
+        self
+    }
+
+    /// Grows [`LayerImage::content`] to hold `rect` (before writing texels there).
+    pub fn include(&mut self, rect: &TexelRect) {
+        self.content = self.content.union(rect);
     }
 
     /// Checks that the buffers match `res`.
     pub fn validate(&self) -> Result<(), CompressError> {
         let n = self.res as usize * self.res as usize;
+        if self.content.x1 > self.res || self.content.y1 > self.res {
+            return Err(CompressError::Invalid(format!(
+                "layer image of resolution {} has content rectangle {:?} beyond it",
+                self.res, self.content
+            )));
+        }
         if self.res == 0
             || self.rgba.len() != 4 * n
             || self.border.len() != n
@@ -117,20 +166,35 @@ impl LayerImage {
         self.far_border[i] = false;
     }
 
+    /// The linear index ranges of the rows of [`LayerImage::content`].
+    pub fn content_rows(&self) -> impl Iterator<Item = std::ops::Range<usize>> + use<> {
+        self.content.rows(self.res)
+    }
+
     /// Number of opaque texels.
     pub fn opaque_count(&self) -> u64 {
-        self.rgba
-            .chunks_exact(4)
-            .filter(|p| p[3] >= OPAQUE_ALPHA)
-            .count() as u64
+        self.content_rows()
+            .map(|row| {
+                self.rgba[4 * row.start..4 * row.end]
+                    .chunks_exact(4)
+                    .filter(|p| p[3] >= OPAQUE_ALPHA)
+                    .count() as u64
+            })
+            .sum()
     }
 
     /// One flag per texel: opaque or not.
     pub fn opaque_mask(&self) -> Vec<bool> {
-        self.rgba
-            .chunks_exact(4)
-            .map(|p| p[3] >= OPAQUE_ALPHA)
-            .collect()
+        let mut mask = vec![false; self.texel_count()];
+        for row in self.content_rows() {
+            for (m, p) in mask[row.clone()]
+                .iter_mut()
+                .zip(self.rgba[4 * row.start..4 * row.end].chunks_exact(4))
+            {
+                *m = p[3] >= OPAQUE_ALPHA;
+            }
+        }
+        mask
     }
 }
 
@@ -164,6 +228,67 @@ pub fn all3x3(mask: &[bool], res: u32, outside: bool) -> Vec<bool> {
 /// 8 neighbours. Neighbours outside the image count as `outside`.
 pub fn any3x3(mask: &[bool], res: u32, outside: bool) -> Vec<bool> {
     reduce3x3(mask, res, outside, false)
+}
+
+/// [`all3x3`] computed only inside `rect` (false elsewhere): equal to it everywhere when `rect`
+/// holds every true texel of `mask` (an eroded mask lies within the mask).
+pub fn all3x3_in(mask: &[bool], res: u32, outside: bool, rect: &TexelRect) -> Vec<bool> {
+    reduce3x3_in::<true>(mask, res as usize, outside, rect)
+}
+
+/// [`any3x3`] computed only inside `rect` (false elsewhere): equal to it everywhere when `rect`
+/// holds every true texel of `mask` grown by one texel and `outside` is false.
+pub fn any3x3_in(mask: &[bool], res: u32, outside: bool, rect: &TexelRect) -> Vec<bool> {
+    reduce3x3_in::<false>(mask, res as usize, outside, rect)
+}
+
+fn reduce3x3_in<const ALL: bool>(
+    mask: &[bool],
+    r: usize,
+    outside: bool,
+    rect: &TexelRect,
+) -> Vec<bool> {
+    let mut out = vec![false; r * r];
+    if rect.is_empty() || r == 0 {
+        return out;
+    }
+    let (x0, x1) = (rect.x0 as usize, (rect.x1 as usize).min(r));
+    let (y0, y1) = (rect.y0 as usize, (rect.y1 as usize).min(r));
+    let w = x1 - x0;
+    // horizontal pass over the rows y0 - 1 ..= y1 (those inside the image), columns x0..x1
+    let hy0 = y0.saturating_sub(1);
+    let hy1 = (y1 + 1).min(r);
+    let mut h = vec![false; (hy1 - hy0) * w];
+    for (hrow, y) in h.chunks_exact_mut(w).zip(hy0..hy1) {
+        let row = &mask[y * r..(y + 1) * r];
+        let at = |x: isize| -> bool {
+            if x < 0 || x as usize >= r {
+                outside
+            } else {
+                row[x as usize]
+            }
+        };
+        for (o, x) in hrow.iter_mut().zip(x0..x1) {
+            let x = x as isize;
+            *o = op3::<ALL>(at(x - 1), row[x as usize], at(x + 1));
+        }
+    }
+    let pad = vec![outside; w];
+    for y in y0..y1 {
+        let hrow = |yy: isize| -> &[bool] {
+            if yy < 0 || yy as usize >= r {
+                &pad
+            } else {
+                let k = yy as usize - hy0;
+                &h[k * w..(k + 1) * w]
+            }
+        };
+        let (up, mid, down) = (hrow(y as isize - 1), hrow(y as isize), hrow(y as isize + 1));
+        for (i, o) in out[y * r + x0..y * r + x1].iter_mut().enumerate() {
+            *o = op3::<ALL>(up[i], mid[i], down[i]);
+        }
+    }
+    out
 }
 
 /// Separable 3×3 min (`all`) or max (`any`) filter with a constant outside value.
@@ -249,6 +374,20 @@ mod tests {
                     }
                     assert_eq!(all[(y * 7 + x) as usize], a);
                     assert_eq!(any[(y * 7 + x) as usize], o);
+                    for rect in [
+                        TexelRect::full(res),
+                        TexelRect {
+                            x0: 1,
+                            y0: 2,
+                            x1: 6,
+                            y1: 5,
+                        },
+                    ] {
+                        let inside = rect.contains(x as u32, y as u32);
+                        let k = (y * 7 + x) as usize;
+                        assert_eq!(all3x3_in(&mask, res, outside, &rect)[k], a && inside);
+                        assert_eq!(any3x3_in(&mask, res, outside, &rect)[k], o && inside);
+                    }
                 }
             }
         }

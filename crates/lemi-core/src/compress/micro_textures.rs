@@ -99,6 +99,78 @@ impl TexelRect {
     pub fn contains(&self, x: u32, y: u32) -> bool {
         x >= self.x0 && x < self.x1 && y >= self.y0 && y < self.y1
     }
+
+    /// The whole `res × res` image.
+    pub fn full(res: u32) -> TexelRect {
+        TexelRect {
+            x0: 0,
+            y0: 0,
+            x1: res,
+            y1: res,
+        }
+    }
+
+    /// The empty rectangle.
+    pub fn empty() -> TexelRect {
+        TexelRect {
+            x0: 0,
+            y0: 0,
+            x1: 0,
+            y1: 0,
+        }
+    }
+
+    /// Whether the rectangle holds no texel.
+    pub fn is_empty(&self) -> bool {
+        self.x1 <= self.x0 || self.y1 <= self.y0
+    }
+
+    /// Number of texels (0 when empty).
+    pub fn texels(&self) -> u64 {
+        if self.is_empty() {
+            0
+        } else {
+            self.area()
+        }
+    }
+
+    /// The smallest rectangle holding both.
+    pub fn union(&self, o: &TexelRect) -> TexelRect {
+        match (self.is_empty(), o.is_empty()) {
+            (true, _) => *o,
+            (_, true) => *self,
+            _ => TexelRect {
+                x0: self.x0.min(o.x0),
+                y0: self.y0.min(o.y0),
+                x1: self.x1.max(o.x1),
+                y1: self.y1.max(o.y1),
+            },
+        }
+    }
+
+    /// The linear index ranges (row-major, `res` texels a row) of the rectangle's rows.
+    pub fn rows(&self, res: u32) -> impl Iterator<Item = std::ops::Range<usize>> + use<> {
+        let (r, c) = (res as usize, *self);
+        let ys = if c.is_empty() {
+            0..0
+        } else {
+            c.y0 as usize..c.y1 as usize
+        };
+        ys.map(move |y| y * r + c.x0 as usize..y * r + c.x1 as usize)
+    }
+
+    /// Grown by `by` texels on every side, clamped to a `res × res` image (empty stays empty).
+    pub fn grown(&self, by: u32, res: u32) -> TexelRect {
+        if self.is_empty() {
+            return *self;
+        }
+        TexelRect {
+            x0: self.x0.saturating_sub(by),
+            y0: self.y0.saturating_sub(by),
+            x1: self.x1.saturating_add(by).min(res),
+            y1: self.y1.saturating_add(by).min(res),
+        }
+    }
 }
 
 /// One rectangle cut out of a layer image, and the impostor quad it becomes.
@@ -206,8 +278,9 @@ pub fn extract_micro_textures(
     let cell_of = |x: usize, y: usize| (y / cs) * g + x / cs;
     let mut count = vec![0u64; g * g];
     let mut opaque_texels = 0u64;
-    for y in 0..res {
-        for x in 0..res {
+    let c = image.content;
+    for y in c.y0 as usize..c.y1 as usize {
+        for x in c.x0 as usize..c.x1 as usize {
             if image.is_opaque(y * res + x) {
                 count[cell_of(x, y)] += 1;
                 opaque_texels += 1;

@@ -132,6 +132,15 @@ pub struct CompressedCell {
     pub stats: CompressStats,
 }
 
+/// Stages 1–3 of one face: what [`pack_cell`] packs with the other faces of its cell.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompressedFace {
+    /// Ordered by layer, then extraction order.
+    pub micro_textures: Vec<MicroTexture>,
+    /// The stages' statistics (without packing).
+    pub stats: CompressStats,
+}
+
 /// Runs gap filling (unless [`CompressOptions::gap_fill`] is off), hidden-texel removal,
 /// micro-texture extraction and packing on one view cell. The layer images are modified in place
 /// (gap filled, hidden texels erased). A micro-texture's
@@ -140,94 +149,107 @@ pub fn compress_cell(
     faces: &mut [FaceLayers],
     options: &CompressOptions,
 ) -> Result<CompressedCell, CompressError> {
-    options.micro.validate()?;
-    for f in faces.iter() {
-        if f.distances.len() != f.layers.len() {
-            return Err(CompressError::BadFace {
-                face: f.face,
-                reason: format!(
-                    "{} layer images but {} distances",
-                    f.layers.len(),
-                    f.distances.len()
-                ),
-            });
-        }
-        if f.distances.iter().any(|d| !(d.is_finite() && *d > 0.0))
-            || !(f.distances.windows(2).all(|w| w[0] < w[1])
-                || f.distances.windows(2).all(|w| w[0] > w[1]))
-        {
-            return Err(CompressError::BadFace {
-                face: f.face,
-                reason: format!(
-                    "layer distances must be finite, positive and strictly monotonic, got {:?}",
-                    f.distances
-                ),
-            });
-        }
-        layer_image::common_res(&f.layers).map_err(|e| CompressError::BadFace {
-            face: f.face,
-            reason: e.to_string(),
-        })?;
-    }
-    let layer_bytes = faces
-        .iter()
-        .flat_map(|f| &f.layers)
-        .map(|l| l.rgba.len() as u64)
-        .sum();
-    // stages 1 and 2 per face (in parallel over faces)
-    let per_face: Vec<(GapFillStats, HiddenTexelStats)> = faces
+    let compressed: Vec<CompressedFace> = faces
         .par_iter_mut()
-        .map(|f| -> Result<_, CompressError> {
-            // the stages want the nearest layer first
-            let far_first = f.distances.len() > 1 && f.distances[0] > f.distances[1];
-            if far_first {
-                f.layers.reverse();
-            }
-            let gaps = if options.gap_fill {
-                fill_gaps(&mut f.layers, options.gap_sources)
-            } else {
-                Ok(GapFillStats::default())
-            };
-            let mut result =
-                gaps.and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
-            if far_first {
-                f.layers.reverse();
-                if let Ok((_, h)) = &mut result {
-                    h.removed_per_layer.reverse();
-                }
-            }
-            result
-        })
+        .map(|f| compress_face(f, options))
         .collect::<Result<_, _>>()?;
+    pack_cell(compressed, options)
+}
+
+/// Stages 1–3 (gap filling unless [`CompressOptions::gap_fill`] is off, hidden-texel removal,
+/// micro-texture extraction) on one face, so that a bake can drop a face's layer images before it
+/// records the next ([`pack_cell`] then packs the faces of the cell). The same as the face's part
+/// of [`compress_cell`].
+pub fn compress_face(
+    f: &mut FaceLayers,
+    options: &CompressOptions,
+) -> Result<CompressedFace, CompressError> {
+    options.micro.validate()?;
+    if f.distances.len() != f.layers.len() {
+        return Err(CompressError::BadFace {
+            face: f.face,
+            reason: format!(
+                "{} layer images but {} distances",
+                f.layers.len(),
+                f.distances.len()
+            ),
+        });
+    }
+    if f.distances.iter().any(|d| !(d.is_finite() && *d > 0.0))
+        || !(f.distances.windows(2).all(|w| w[0] < w[1])
+            || f.distances.windows(2).all(|w| w[0] > w[1]))
+    {
+        return Err(CompressError::BadFace {
+            face: f.face,
+            reason: format!(
+                "layer distances must be finite, positive and strictly monotonic, got {:?}",
+                f.distances
+            ),
+        });
+    }
+    layer_image::common_res(&f.layers).map_err(|e| CompressError::BadFace {
+        face: f.face,
+        reason: e.to_string(),
+    })?;
     let mut stats = CompressStats {
-        layer_bytes,
+        layer_bytes: f.layers.iter().map(|l| l.rgba.len() as u64).sum(),
         ..Default::default()
     };
-    for (g, h) in &per_face {
-        stats.gap_fill.add(g);
-        stats.hidden.add(h);
+    // stages 1 and 2 want the nearest layer first
+    let far_first = f.distances.len() > 1 && f.distances[0] > f.distances[1];
+    if far_first {
+        f.layers.reverse();
     }
-    // stage 3 per (face, layer), in parallel, collected in order
-    let jobs: Vec<(Face, u32, f64, &LayerImage)> = faces
-        .iter()
-        .flat_map(|f| {
-            f.layers
-                .iter()
-                .zip(&f.distances)
-                .enumerate()
-                .map(move |(k, (l, &d))| (f.face, k as u32, d, l))
-        })
-        .collect();
-    let extracted: Vec<(Vec<MicroTexture>, MicroTextureStats)> = jobs
+    let gaps = if options.gap_fill {
+        fill_gaps(&mut f.layers, options.gap_sources)
+    } else {
+        Ok(GapFillStats::default())
+    };
+    let result = gaps.and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
+    if far_first {
+        f.layers.reverse();
+    }
+    let (gaps, mut hidden) = result?;
+    if far_first {
+        hidden.removed_per_layer.reverse();
+    }
+    stats.gap_fill.add(&gaps);
+    stats.hidden.add(&hidden);
+    // stage 3 per layer, in parallel, collected in order
+    let face = f.face;
+    let extracted: Vec<(Vec<MicroTexture>, MicroTextureStats)> = f
+        .layers
         .par_iter()
-        .map(|&(face, k, d, l)| extract_micro_textures(l, face, k, d, &options.micro))
+        .zip(f.distances.par_iter())
+        .enumerate()
+        .map(|(k, (l, &d))| extract_micro_textures(l, face, k as u32, d, &options.micro))
         .collect::<Result<_, _>>()?;
     let mut micro_textures = Vec::new();
     for (m, s) in extracted {
         stats.micro.add(&s);
         micro_textures.extend(m);
     }
-    // stage 4 over the whole cell
+    Ok(CompressedFace {
+        micro_textures,
+        stats,
+    })
+}
+
+/// Stage 4 over the whole cell: packs the micro-textures of its faces (in face order) into
+/// macro-textures.
+pub fn pack_cell(
+    faces: Vec<CompressedFace>,
+    options: &CompressOptions,
+) -> Result<CompressedCell, CompressError> {
+    let mut stats = CompressStats::default();
+    let mut micro_textures = Vec::new();
+    for f in faces {
+        stats.layer_bytes += f.stats.layer_bytes;
+        stats.gap_fill.add(&f.stats.gap_fill);
+        stats.hidden.add(&f.stats.hidden);
+        stats.micro.add(&f.stats.micro);
+        micro_textures.extend(f.micro_textures);
+    }
     let (macro_textures, placements, packing) =
         pack_micro_textures(&micro_textures, &options.packing)?;
     stats.packing = packing;
