@@ -28,9 +28,11 @@ pub struct Args {
     /// Number of cells in the strip.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub cells: u32,
-    /// Texels per cube-face side.
-    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(16..=8192))]
-    pub resolution: u32,
+    /// Texels per cube-face side [default: the smallest at which a layer texel covers at most
+    /// one pixel of the demo's output view, 1663 for 960 px at 60°, so that the impostors are as
+    /// sharp as the geometry].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    pub resolution: Option<u32>,
     /// Layers per face.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub layers: u32,
@@ -39,9 +41,10 @@ pub struct Args {
     pub backend: String,
 }
 
-/// The output view the demo bakes for and renders: 1280×720, 60° horizontal field of view.
-const OUT_W: u32 = 1280;
-const OUT_H: u32 = 720;
+/// The output view the demo bakes for and renders: 960×540 (the size `lemi view` opens), 60°
+/// horizontal field of view.
+const OUT_W: u32 = 960;
+const OUT_H: u32 = 540;
 const OUT_FOV_X: f64 = 60.0;
 /// Eye height above the street (m).
 const EYE: f64 = 1.7;
@@ -53,6 +56,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.cell
         );
     }
+    // layers as sharp as the output view: a texel subtends at most one output pixel
+    let resolution = match args.resolution {
+        Some(r) => r,
+        None => lemi_core::placement::min_face_res_for_output_view(OUT_FOV_X.to_radians(), OUT_W)
+            .context("the resolution matching the demo's output view")?,
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     let bundle = args.out.join("bundle");
@@ -62,7 +71,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let half = 0.5 * args.cell;
     let region = lemi_core::Aabb::new(DVec3::new(x0, EYE, -half), DVec3::new(x1, EYE, half));
     println!(
-        "lemi demo: baking {} cells of {} m along the avenue of {} into {}",
+        "lemi demo: baking {} cells of {} m along the avenue of {} into {} \
+         ({resolution}² layers for a {OUT_W}×{OUT_H}, {OUT_FOV_X}° view)",
         args.cells,
         args.cell,
         args.scene,
@@ -79,7 +89,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cells: Vec::new(),
         cell_size: args.cell,
         cell_height: Some(args.cell_height),
-        resolution: args.resolution,
+        resolution,
         layers: Some(args.layers),
         near_field: None,
         faces: 4,

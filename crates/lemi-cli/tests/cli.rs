@@ -477,3 +477,40 @@ fn eval_certificate_gates_and_bad_input() {
     std::fs::write(&cell, &bytes).unwrap();
     assert_clean_error(&lemi(&quick), "0_0_0.lemicell");
 }
+
+/// `lemi demo` (the README's main job), small: bakes a cell, writes the side-by-side picture at
+/// the demo's output view (960×540, three panels), reports no crack pixels, and resumes on a
+/// second run. Without `--resolution` the layers match the output view (a texel per pixel).
+#[test]
+fn demo_bakes_renders_and_resumes() {
+    let d = tmp("cli", "demo");
+    let args = [
+        "demo",
+        "--scene",
+        "builtin:city:20k",
+        "-o",
+        d.to_str().unwrap(),
+        "--cells",
+        "1",
+        "--resolution",
+        "96",
+        "--layers",
+        "8",
+    ];
+    let o = lemi(&args);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}\n{out}", stderr(&o));
+    assert!(out.contains("96² layers for a 960×540, 60° view"), "{out}");
+    assert!(out.contains(" 0 crack pixels"), "{out}");
+    let img = image::open(d.join("compare.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (3 * 960, 540));
+    let again = lemi(&args);
+    let out = String::from_utf8_lossy(&again.stdout).into_owned();
+    assert!(again.status.success(), "{}", stderr(&again));
+    assert!(out.contains("1 skipped"), "resumes: {out}");
+    // the resolution the demo bakes at without `--resolution`: a texel per pixel of its view
+    assert_eq!(
+        lemi_core::placement::min_face_res_for_output_view(60f64.to_radians(), 960).unwrap(),
+        1663
+    );
+}

@@ -318,8 +318,7 @@ impl<'a> CellRecorder<'a> {
                 }
             }
             let content = frame.content;
-            let image = LayerImage::from_parts(res, frame.rgba, border, far_border)
-                .map(|image| image.with_content(content))
+            let image = LayerImage::from_parts_in(res, frame.rgba, border, far_border, content)
                 .map_err(|source| RecordError::Image {
                     cell: cell.id(),
                     face,

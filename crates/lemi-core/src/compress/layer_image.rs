@@ -68,15 +68,7 @@ impl LayerImage {
             content: TexelRect::full(res),
         };
         image.validate()?;
-        // writes only where a far-border flag is set: the pages of an empty layer stay untouched
-        for (b, _) in image
-            .border
-            .iter_mut()
-            .zip(&image.far_border)
-            .filter(|(_, &f)| f)
-        {
-            *b = true;
-        }
+        image.merge_far_border();
         Ok(image)
     }
 
@@ -102,6 +94,35 @@ impl LayerImage {
             "a texel outside the content rectangle is not empty"
         );
         self
+    }
+
+    /// Makes [`LayerImage::far_border`] a subset of [`LayerImage::border`] inside the content.
+    fn merge_far_border(&mut self) {
+        for i in self.content.rows(self.res).flatten() {
+            self.border[i] |= self.far_border[i];
+        }
+    }
+
+    /// [`LayerImage::from_parts`] for an image whose texels outside `content` are known to be
+    /// empty (see [`LayerImage::with_content`]): the far-border merge looks only inside it.
+    pub fn from_parts_in(
+        res: u32,
+        rgba: Vec<u8>,
+        border: Vec<bool>,
+        far_border: Vec<bool>,
+        content: TexelRect,
+    ) -> Result<Self, CompressError> {
+        let mut image = LayerImage {
+            res,
+            rgba,
+            border,
+            far_border,
+            content: TexelRect::full(res),
+        };
+        image.validate()?;
+        image = image.with_content(content);
+        image.merge_far_border();
+        Ok(image)
     }
 
     /// Grows [`LayerImage::content`] to hold `rect` (before writing texels there).
