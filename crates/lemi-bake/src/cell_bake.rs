@@ -162,6 +162,8 @@ impl<'a> Baker<'a> {
                 } else {
                     1
                 },
+                // no texture doubled for the few footprints that overflow a power of two
+                trim: true,
                 ..Default::default()
             },
             ..Default::default()

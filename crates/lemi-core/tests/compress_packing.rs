@@ -115,11 +115,17 @@ fn analyzer_catches_overlaps_and_bad_sizes() {
         placements: vec![at(0, 0, 0, false), at(0, 5, 0, false)],
     };
     assert!(analyze_packing(&sizes, &outside).is_err());
-    let not_pow2 = Packing {
+    // a trimmed (not power-of-two) size is fine, an empty one is not
+    let trimmed = Packing {
         macro_sizes: vec![(12, 4)],
         placements: vec![at(0, 0, 0, false), at(0, 4, 0, false)],
     };
-    assert!(analyze_packing(&sizes, &not_pow2).is_err());
+    assert!(analyze_packing(&sizes, &trimmed).is_ok());
+    let empty = Packing {
+        macro_sizes: vec![(12, 4), (0, 4)],
+        placements: vec![at(0, 0, 0, false), at(0, 4, 0, false)],
+    };
+    assert!(analyze_packing(&sizes, &empty).is_err());
 }
 
 fn micro(w: u32, h: u32, seed: u64) -> MicroTexture {
@@ -292,7 +298,11 @@ proptest! {
 }
 
 fn block_opts(max_size: u32) -> PackingOptions {
-    PackingOptions { max_size, block: 4 }
+    PackingOptions {
+        max_size,
+        block: 4,
+        ..Default::default()
+    }
 }
 
 #[test]
@@ -308,7 +318,8 @@ fn without_block_alignment_small_micro_textures_share_blocks() {
         &sizes,
         &PackingOptions {
             max_size: 64,
-            block: 3
+            block: 3,
+            ..Default::default()
         }
     )
     .is_err());
@@ -358,5 +369,38 @@ proptest! {
         }
         let used: u64 = macros.iter().map(|m| m.rgba.chunks_exact(4).filter(|p| p[3] != 0).count() as u64).sum();
         prop_assert_eq!(used, stats.micro_texels);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    /// Trimmed packing (`PackingOptions::trim`): the same positions as the paper's power-of-two
+    /// packing, each macro-texture cut to its footprints (some footprint touches its right and
+    /// its bottom edge), sides multiples of the block, still a valid packing.
+    #[test]
+    fn trimmed_packing_keeps_the_positions_and_cuts_to_the_footprints(
+        sizes in prop::collection::vec((1u32..=40, 1u32..=40), 1..80),
+        max_log in 6u32..9,
+        block in prop::sample::select(vec![1u32, 4]),
+    ) {
+        let max = 1 << max_log;
+        let paper = PackingOptions { max_size: max, block, trim: false };
+        let trimmed = PackingOptions { trim: true, ..paper };
+        let (a, b) = (pack_rects(&sizes, &paper).unwrap(), pack_rects(&sizes, &trimmed).unwrap());
+        prop_assert_eq!(&a.placements, &b.placements);
+        prop_assert!(analyze_packing(&sizes, &b).is_ok());
+        for (m, (&(w0, h0), &(w, h))) in a.macro_sizes.iter().zip(&b.macro_sizes).enumerate() {
+            prop_assert!(w <= w0 && h <= h0 && w % block == 0 && h % block == 0);
+            let footprints: Vec<(u32, u32)> = sizes.iter().zip(&b.placements)
+                .filter(|(_, p)| p.macro_index as usize == m)
+                .map(|(&(sw, sh), p)| {
+                    let pad = |v: u32| v.div_ceil(block) * block;
+                    let (fw, fh) = p.footprint(pad(sw), pad(sh));
+                    (p.x + fw, p.y + fh)
+                })
+                .collect();
+            prop_assert_eq!(footprints.iter().map(|f| f.0).max(), Some(w));
+            prop_assert_eq!(footprints.iter().map(|f| f.1).max(), Some(h));
+        }
     }
 }

@@ -40,6 +40,11 @@ pub struct PackingOptions {
     /// Side of the texel blocks the macro-textures are encoded in: 1 (PNG, no alignment) or a
     /// power of two such as 4 (BC7, BC1): footprints are padded to, and placed on, multiples of it.
     pub block: u32,
+    /// Trim every macro-texture to the footprints it holds (its width to the rightmost footprint's
+    /// right edge, its height to the topmost's), instead of the paper's power-of-two sides: a
+    /// packing that overflows a power of two by a little no longer doubles the texture. Every
+    /// GPU lemi runs on samples textures of any size; the sides stay multiples of `block`.
+    pub trim: bool,
 }
 
 impl Default for PackingOptions {
@@ -47,6 +52,7 @@ impl Default for PackingOptions {
         PackingOptions {
             max_size: 4096,
             block: 1,
+            trim: false,
         }
     }
 }
@@ -333,6 +339,18 @@ pub fn pack_rects(
                 free_area -= w as u64 * h as u64;
             }
         }
+        let (width, height) = if options.trim {
+            // every footprint's size and position is a multiple of the block side
+            placed.iter().zip(&remaining).filter(|(p, _)| **p).fold(
+                (0, 0),
+                |(w, h), (_, &(i, fw, fh, _))| {
+                    let p = &placements[i];
+                    (w.max(p.x + fw), h.max(p.y + fh))
+                },
+            )
+        } else {
+            (width, height)
+        };
         macro_sizes.push((width, height));
         remaining = remaining
             .into_iter()
@@ -348,7 +366,8 @@ pub fn pack_rects(
 }
 
 /// Checks a packing of rectangles `sizes`: one placement per rectangle, each inside its
-/// macro-texture, no two overlapping, power-of-two macro sizes, no empty macro-texture. Returns the
+/// macro-texture, no two overlapping, non-zero macro sizes (powers of two unless trimmed,
+/// [`PackingOptions::trim`]), no empty macro-texture. Returns the
 /// statistics or the first violation.
 pub fn analyze_packing(
     sizes: &[(u32, u32)],
@@ -363,8 +382,8 @@ pub fn analyze_packing(
         ));
     }
     for (m, &(w, h)) in packing.macro_sizes.iter().enumerate() {
-        if !w.is_power_of_two() || !h.is_power_of_two() {
-            return bad(format!("macro-texture {m} is {w}×{h}, not powers of two"));
+        if w == 0 || h == 0 {
+            return bad(format!("macro-texture {m} is {w}×{h}, empty"));
         }
     }
     let mut per_macro: Vec<Vec<(usize, Rect)>> = vec![Vec::new(); packing.macro_sizes.len()];
