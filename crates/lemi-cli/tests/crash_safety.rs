@@ -407,45 +407,82 @@ fn a_full_disk_is_a_clear_error_and_loses_no_cell() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// Makes directories read-only for the bake, whoever runs it, and undoes it when dropped: as root
-/// (which ignores permission bits) the immutable attribute (`chattr +i`, refused to root too),
-/// otherwise the permission bits. `None` when it cannot be arranged here.
-struct ReadOnly(Vec<PathBuf>, bool);
+/// How [`ReadOnly`] keeps the bake from writing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Denial {
+    /// The immutable attribute (`chattr +i`): refused to root too, which ignores permission bits.
+    Immutable,
+    /// Mode 0555, the bake run by the user running the tests (not root).
+    Bits,
+    /// Mode 0555, the bake run as the unprivileged user 65534 (root, where the file system has
+    /// no immutable attribute).
+    OtherUser,
+}
+
+/// Makes directories read-only for the bake and undoes it when dropped (pass or fail).
+struct ReadOnly(Vec<PathBuf>, Denial);
 
 impl ReadOnly {
     fn new(dirs: &[&Path]) -> Result<ReadOnly, String> {
         // SAFETY: geteuid has no preconditions.
         let root = unsafe { libc::geteuid() } == 0;
-        let mut ro = ReadOnly(Vec::new(), root);
-        for d in dirs {
-            if root {
-                let o = std::process::Command::new("chattr")
-                    .arg("+i")
-                    .arg(d)
-                    .output()
-                    .map_err(|e| format!("chattr: {e}"))?;
-                if !o.status.success() {
-                    return Err(format!(
-                        "chattr +i {}: {}",
-                        d.display(),
-                        String::from_utf8_lossy(&o.stderr).trim()
-                    ));
+        let chattr = |d: &Path| -> Result<(), String> {
+            let o = std::process::Command::new("chattr")
+                .arg("+i")
+                .arg(d)
+                .output()
+                .map_err(|e| format!("chattr: {e}"))?;
+            if !o.status.success() {
+                return Err(format!(
+                    "chattr +i {}: {}",
+                    d.display(),
+                    String::from_utf8_lossy(&o.stderr).trim()
+                ));
+            }
+            Ok(())
+        };
+        let denial = match dirs.first() {
+            Some(d) if root => match chattr(d) {
+                Ok(()) => Denial::Immutable,
+                Err(why) => {
+                    eprintln!("{why}: the bake runs as user 65534 on mode 0555 instead");
+                    Denial::OtherUser
+                }
+            },
+            _ if root => Denial::Immutable,
+            _ => Denial::Bits,
+        };
+        let mut ro = ReadOnly(Vec::new(), denial);
+        for (i, d) in dirs.iter().enumerate() {
+            if denial == Denial::Immutable {
+                if i > 0 {
+                    chattr(d)?;
                 }
             } else {
                 use std::os::unix::fs::PermissionsExt;
                 std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o555))
-                    .map_err(|e| e.to_string())?;
+                    .map_err(|e| format!("chmod 0555 {}: {e}", d.display()))?;
             }
             ro.0.push(d.to_path_buf());
         }
         Ok(ro)
+    }
+
+    /// Runs `lemi ARGS` as [`Denial`] says.
+    fn run(&self, args: &[String]) -> Output {
+        use std::os::unix::process::CommandExt;
+        let mut c = lemi_command(args);
+        if self.1 == Denial::OtherUser {
+            c.uid(65534).gid(65534);
+        }
+        c.output().expect("the lemi binary runs")
     }
 }
 
 impl Drop for ReadOnly {
     fn drop(&mut self) {
         for d in &self.0 {
-            if self.1 {
+            if self.1 == Denial::Immutable {
                 let _ = std::process::Command::new("chattr")
                     .arg("-i")
                     .arg(d)
@@ -466,7 +503,10 @@ fn a_read_only_bundle_directory_is_a_clear_error_and_loses_no_cell() {
     let bundle = d.join("bundle");
     partial_bundle(clean, &bundle, 2);
     let ro = match ReadOnly::new(&[&bundle, &bundle.join("cells")]) {
-        Ok(ro) => ro,
+        Ok(ro) => {
+            eprintln!("read-only by {:?}", ro.1);
+            ro
+        }
         Err(why) => {
             println!(
                 "SKIPPED a_read_only_bundle_directory_is_a_clear_error_and_loses_no_cell: {why}"
@@ -474,7 +514,7 @@ fn a_read_only_bundle_directory_is_a_clear_error_and_loses_no_cell() {
             return;
         }
     };
-    let o = run(&bake_args(SIX_CELLS, &bundle));
+    let o = ro.run(&bake_args(SIX_CELLS, &bundle));
     let failing = format!("{}.lemicell", clean.cells[2].0);
     assert_clean_error_all(
         &o,
@@ -497,7 +537,7 @@ fn a_read_only_bundle_directory_is_a_clear_error_and_loses_no_cell() {
     // 2. every cell baked, only the bundle directory read-only: the manifest cannot be written
     std::fs::remove_file(bundle.join("manifest.json")).unwrap();
     let ro = ReadOnly::new(&[&bundle]).unwrap();
-    let o = run(&bake_args(SIX_CELLS, &bundle));
+    let o = ro.run(&bake_args(SIX_CELLS, &bundle));
     assert_clean_error_all(&o, &["manifest.json", "cannot write", "read-only"]);
     eprintln!("{}", stderr(&o).trim());
     drop(ro);
