@@ -407,6 +407,86 @@ fn a_full_disk_is_a_clear_error_and_loses_no_cell() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
+/// A small tmpfs mounted on a directory, unmounted when dropped (pass or fail).
+struct Tmpfs(PathBuf);
+
+impl Tmpfs {
+    fn mount(dir: &Path, bytes: u64) -> Result<Tmpfs, String> {
+        std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+        let o = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={bytes}"), "tmpfs"])
+            .arg(dir)
+            .output()
+            .map_err(|e| format!("mount: {e}"))?;
+        if !o.status.success() {
+            return Err(format!(
+                "mount -t tmpfs: {}",
+                String::from_utf8_lossy(&o.stderr).trim()
+            ));
+        }
+        Ok(Tmpfs(dir.to_path_buf()))
+    }
+
+    fn resize(&self, bytes: u64) {
+        let o = std::process::Command::new("mount")
+            .args(["-o", &format!("remount,size={bytes}")])
+            .arg(&self.0)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+/// A full disk for real: the bundle on a tmpfs with room for the first cell file and less than
+/// a page more, so writing the second fails with ENOSPC. Needs the right to mount (root in CI).
+#[test]
+fn a_full_tmpfs_is_a_clear_error_and_loses_no_cell() {
+    let clean = six();
+    let d = tmp("crash", "tmpfs");
+    let page = 4096;
+    let room = clean.cells[0].1.div_ceil(page) * page + page;
+    let fs = match Tmpfs::mount(&d.join("fs"), room) {
+        Ok(fs) => fs,
+        Err(why) => {
+            println!("SKIPPED a_full_tmpfs_is_a_clear_error_and_loses_no_cell: {why}");
+            return;
+        }
+    };
+    assert!(clean.cells[1].1 > page, "the second cell fits in a page");
+    let bundle = fs.0.join("bundle");
+    let o = run(&bake_args(SIX_CELLS, &bundle));
+    let failing = format!("{}.lemicell", clean.cells[1].0);
+    assert_clean_error_all(
+        &o,
+        &[
+            &failing,
+            "No space left on device",
+            "disk is full",
+            "run the same command again",
+        ],
+    );
+    let left = inspect_sound(&bundle, clean);
+    eprintln!("tmpfs of {room} bytes: {left:?}; {}", stderr(&o).trim());
+    assert_eq!((left.cells, left.refused, left.temp), (1, 0, 0), "{left:?}");
+    // room again: the same command keeps the cell written and finishes the bundle
+    fs.resize(64 << 20);
+    let o = run(&bake_args(SIX_CELLS, &bundle));
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(baked_skipped(&o), (5, 1));
+    assert_same_bundle(&clean.bundle, &bundle);
+    drop(fs);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
 /// How [`ReadOnly`] keeps the bake from writing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Denial {
