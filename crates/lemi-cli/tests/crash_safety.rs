@@ -266,9 +266,12 @@ fn killed_and_resumed(
             if left.manifest { ", manifest" } else { "" }
         );
     }
+    let temp_before = inspect_sound(bundle, clean).temp;
     let o = run(&args);
     assert!(o.status.success(), "resuming: {}", stderr(&o));
     let (baked, skipped) = baked_skipped(&o);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["stale_temp_files_removed"], temp_before);
     assert_same_bundle(&clean.bundle, bundle);
     line += &format!("resumed: {skipped} skipped, {baked} baked; identical");
     (line, landed)
