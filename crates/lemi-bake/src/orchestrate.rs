@@ -28,6 +28,15 @@ pub enum BakeError {
         #[source]
         source: std::io::Error,
     },
+    /// A file or directory of the bundle could not be written; `hint` says why where the error
+    /// tells (disk full, read-only, the directory deleted) and what to do.
+    #[error("{path}: cannot write: {source}{hint}")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+        hint: String,
+    },
     /// A bake parameter out of range ([`ParamsError::parameter`] names it).
     #[error(transparent)]
     Params(#[from] ParamsError),
@@ -86,6 +95,62 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> BakeError + '_ {
     }
 }
 
+/// The error of writing `path` (a file, or a directory being created) in the bundle `bundle`,
+/// with what it means for the bake: cells already written are complete and kept (every file is
+/// written whole or not at all), so the same command run again resumes.
+fn write_error(bundle: &Path, path: &Path) -> impl FnOnce(std::io::Error) -> BakeError {
+    let (bundle, path) = (bundle.to_path_buf(), path.to_path_buf());
+    move |source| {
+        use std::io::ErrorKind;
+        let resume = "; cells already written are complete and kept: run the same command again \
+                      to resume";
+        let hint = match source.kind() {
+            ErrorKind::StorageFull | ErrorKind::FileTooLarge | ErrorKind::QuotaExceeded => {
+                format!(" (the disk is full or a file size limit was reached){resume}")
+            }
+            ErrorKind::ReadOnlyFilesystem | ErrorKind::PermissionDenied => {
+                format!(" (the bundle directory is read-only or not writable){resume}")
+            }
+            ErrorKind::NotFound if !bundle.is_dir() => format!(
+                " (the bundle directory {} no longer exists: it was deleted or moved during the \
+                 bake; run the same command again to bake it anew)",
+                bundle.display()
+            ),
+            ErrorKind::NotFound => {
+                let dir = path.parent().unwrap_or(&bundle);
+                format!(
+                    " ({} no longer exists: it was deleted or moved during the bake){resume}",
+                    dir.display()
+                )
+            }
+            _ => String::new(),
+        };
+        BakeError::Write { path, source, hint }
+    }
+}
+
+/// [`Manifest::write`]'s error as a [`write_error`].
+fn manifest_write_error(bundle: &Path) -> impl FnOnce(BundleError) -> BakeError + '_ {
+    move |e| match e.kind {
+        lemi_core::bundle::BundleErrorKind::Io(source) => write_error(bundle, &e.path)(source),
+        _ => BakeError::Bundle(e),
+    }
+}
+
+/// Removes the temporary files that runs killed while writing left in the bundle (best effort:
+/// a directory that cannot be listed is left as it is). Returns how many were removed.
+fn remove_stale_temp_files(bundle: &Path, started: std::time::SystemTime) -> usize {
+    [
+        bundle.to_path_buf(),
+        bundle.join("cells"),
+        bundle.join("shards"),
+    ]
+    .iter()
+    .filter(|d| d.is_dir())
+    .map(|d| lemi_core::container::remove_stale_temp_files(d, started).unwrap_or(0))
+    .sum()
+}
+
 /// What to bake and where.
 #[derive(Clone, Debug)]
 pub struct BakeJob {
@@ -135,6 +200,8 @@ pub struct RunSummary {
     pub seconds: f64,
     /// Where the manifest (or, for a shard, the shard record) went.
     pub record: PathBuf,
+    /// Temporary files removed that runs killed while writing had left behind.
+    pub stale_temp_files_removed: usize,
 }
 
 fn entry_for(id: CellId, bytes: &[u8]) -> CellEntry {
@@ -175,9 +242,10 @@ pub fn run(
     mut on_cell: impl FnMut(usize, usize, &CellOutcome),
 ) -> Result<RunSummary, BakeError> {
     let t0 = Instant::now();
+    let started = std::time::SystemTime::now();
     let hash = job.params.hash();
     let cells_dir = job.bundle.join("cells");
-    std::fs::create_dir_all(&cells_dir).map_err(io(&cells_dir))?;
+    std::fs::create_dir_all(&cells_dir).map_err(write_error(&job.bundle, &cells_dir))?;
     let mine: Vec<ViewCell> = match job.shard {
         Some(s) => s.select(&job.cells),
         None => job.cells.clone(),
@@ -196,7 +264,7 @@ pub fn run(
                 source,
             })?;
             let path = job.bundle.join(cell_file_name(cell.id()));
-            write_atomic(&path, &bytes).map_err(io(&path))?;
+            write_atomic(&path, &bytes).map_err(write_error(&job.bundle, &path))?;
             CellOutcome::Baked {
                 entry: entry_for(cell.id(), &bytes),
                 file: Box::new(file),
@@ -224,7 +292,9 @@ pub fn run(
                 grid: job.grid.clone(),
                 cells: entries,
             };
-            manifest.write(&job.bundle)?;
+            manifest
+                .write(&job.bundle)
+                .map_err(manifest_write_error(&job.bundle))?;
             lemi_core::bundle::manifest_path(&job.bundle)
         }
         Some(s) => {
@@ -238,13 +308,13 @@ pub fn run(
                 cells: entries,
             };
             let dir = job.bundle.join("shards");
-            std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+            std::fs::create_dir_all(&dir).map_err(write_error(&job.bundle, &dir))?;
             let path = dir.join(format!("{}-of-{}.json", s.k, s.n));
             let json = serde_json::to_vec_pretty(&rec).map_err(|source| BakeError::Json {
                 path: path.clone(),
                 source,
             })?;
-            write_atomic(&path, &json).map_err(io(&path))?;
+            write_atomic(&path, &json).map_err(write_error(&job.bundle, &path))?;
             path
         }
     };
@@ -252,6 +322,7 @@ pub fn run(
         outcomes,
         seconds: t0.elapsed().as_secs_f64(),
         record,
+        stale_temp_files_removed: remove_stale_temp_files(&job.bundle, started),
     })
 }
 
@@ -259,6 +330,7 @@ pub fn run(
 /// grid, shard count) and that every shard is present, verifies every cell file against its
 /// recorded hash, and writes the manifest. The result equals the manifest of a single run.
 pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
+    let started = std::time::SystemTime::now();
     let dir = bundle.join("shards");
     let rd = std::fs::read_dir(&dir).map_err(io(&dir))?;
     let mut records: Vec<(PathBuf, ShardRecord)> = Vec::new();
@@ -336,6 +408,9 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
         grid: first.grid.clone(),
         cells,
     };
-    manifest.write(bundle)?;
+    manifest
+        .write(bundle)
+        .map_err(manifest_write_error(bundle))?;
+    remove_stale_temp_files(bundle, started);
     Ok(manifest)
 }

@@ -536,6 +536,7 @@ pub fn run(args: Args) -> Result<()> {
             "cells": per_cell.len(),
             "baked": baked,
             "skipped": skipped,
+            "stale_temp_files_removed": summary.stale_temp_files_removed,
             "seconds": summary.seconds,
             "load_seconds": load_s,
             "prepare_seconds": prep_s,
@@ -624,6 +625,12 @@ pub fn run(args: Args) -> Result<()> {
         summary.record.display(),
         human(bytes as f64)
     );
+    if summary.stale_temp_files_removed > 0 {
+        println!(
+            "removed    {} temporary files left by runs killed while writing",
+            summary.stale_temp_files_removed
+        );
+    }
     if job.shard.is_some() {
         println!(
             "next       when every shard is done: lemi bake --merge {}",

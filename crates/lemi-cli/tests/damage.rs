@@ -29,9 +29,13 @@ fn a_damaged_manifest_is_a_clear_error_at_start_of_walk_and_render() {
     assert!(o.status.success(), "{}", stderr(&o));
     let manifest = bundle.join("manifest.json");
     let good = std::fs::read_to_string(&manifest).unwrap();
+    // Edited with its checksum removed, so the checks behind the checksum are reached (a
+    // manifest without one is read unchecked, as one written before the checksum was added).
+    let at = good.rfind(",\n  \"checksum\"").expect("a checksum");
+    let unchecked = format!("{}\n}}", &good[..at]);
     let edited = |from: &str, to: &str| {
-        assert!(good.contains(from), "{from} not in the manifest");
-        good.replacen(from, to, 1).into_bytes()
+        assert!(unchecked.contains(from), "{from} not in the manifest");
+        unchecked.replacen(from, to, 1).into_bytes()
     };
     let damages: Vec<(&str, Vec<u8>, &str)> = vec![
         ("empty", Vec::new(), "manifest.json"),
@@ -41,6 +45,11 @@ fn a_damaged_manifest_is_a_clear_error_at_start_of_walk_and_render() {
             "manifest.json",
         ),
         ("not JSON", b"\x00\x01garbage".to_vec(), "manifest.json"),
+        (
+            "one space more",
+            good.replacen(": ", ":  ", 1).into_bytes(),
+            "checksum mismatch",
+        ),
         (
             "a parameter changed",
             edited("\"resolution\": 32", "\"resolution\": 33"),

@@ -216,6 +216,10 @@ fn walk(r: &mut Reader<'_>) -> Result<(), ContainerError> {
 /// `.<name>.<pid>.<random>.tmp` and created exclusively (`O_EXCL`, so a name taken by anyone else,
 /// e.g. a process with the same pid in another container, is never shared but retried), and the
 /// last rename wins whole.
+///
+/// The writer holds an exclusive `flock` on its temporary file from creating it until after the
+/// rename; the kernel drops it when the process ends, however it ends. A process killed while
+/// writing leaves its temporary file behind, unlocked: [`remove_stale_temp_files`] removes it.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let dir = path
         .parent()
@@ -227,11 +231,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .unwrap_or_else(|| "out".into());
     let (tmp, mut f) = create_temp(dir, &name)?;
     let result = (|| {
+        // Best effort: a file system without locks (some network mounts) still gets the file;
+        // its temporary files are then never taken for stale.
+        let _ = try_lock(&f);
         f.write_all(bytes)?;
         f.sync_all()?;
-        drop(f);
+        // Renamed while still open (and locked), so no one takes it for stale before it is gone.
         std::fs::rename(&tmp, path)
     })();
+    drop(f);
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
@@ -241,6 +249,82 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// Whether `name` is that of a temporary file of [`write_atomic`]: `.<name>.<pid>.<random>.tmp`.
+pub fn is_temp_file_name(name: &str) -> bool {
+    let Some(inner) = name.strip_prefix('.').and_then(|n| n.strip_suffix(".tmp")) else {
+        return false;
+    };
+    let mut parts = inner.rsplitn(3, '.');
+    let (Some(random), Some(pid), Some(target)) = (parts.next(), parts.next(), parts.next()) else {
+        return false;
+    };
+    random.len() == 16
+        && random.bytes().all(|b| b.is_ascii_hexdigit())
+        && !pid.is_empty()
+        && pid.bytes().all(|b| b.is_ascii_digit())
+        && !target.is_empty()
+}
+
+/// Removes the temporary files of [`write_atomic`] in `dir` that a writer killed while writing
+/// left behind: those last modified before `before` (when the caller started; a writer locks its
+/// file as soon as it has created it) that no process holds locked. A file being written by
+/// another process (another shard on shared storage) is locked and kept. Returns how many were
+/// removed. On a file system without locks nothing is removed; elsewhere than Unix neither.
+pub fn remove_stale_temp_files(
+    dir: &Path,
+    before: std::time::SystemTime,
+) -> std::io::Result<usize> {
+    let mut removed = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        if !is_temp_file_name(&entry.file_name().to_string_lossy()) {
+            continue;
+        }
+        let path = entry.path();
+        let old = entry
+            .metadata()
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t < before);
+        if !old {
+            continue;
+        }
+        // Gone already (renamed or removed by its writer): nothing to do.
+        let Ok(f) = std::fs::File::open(&path) else {
+            continue;
+        };
+        if try_lock(&f).unwrap_or(false) {
+            match std::fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    Ok(removed)
+}
+
+/// Takes an exclusive `flock` on `f` without waiting: `Ok(true)` if taken, `Ok(false)` if
+/// another open file holds one.
+#[cfg(unix)]
+fn try_lock(f: &std::fs::File) -> std::io::Result<bool> {
+    use std::os::unix::io::AsRawFd;
+    // SAFETY: flock on a file descriptor `f` owns and keeps open for the call.
+    if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return Ok(true);
+    }
+    let e = std::io::Error::last_os_error();
+    if e.kind() == std::io::ErrorKind::WouldBlock {
+        Ok(false)
+    } else {
+        Err(e)
+    }
+}
+
+#[cfg(not(unix))]
+fn try_lock(_: &std::fs::File) -> std::io::Result<bool> {
+    Err(std::io::Error::other("no flock here"))
 }
 
 /// Creates a new temporary file for [`write_atomic`] in `dir`, with a name no other writer holds.
@@ -354,6 +438,45 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
             .collect();
         assert!(leftovers.is_empty());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn temp_file_names_are_recognised() {
+        assert!(is_temp_file_name(
+            ".0_0_0.lemicell.1234.0123456789abcdef.tmp"
+        ));
+        assert!(is_temp_file_name(".manifest.json.7.fedcba9876543210.tmp"));
+        assert!(!is_temp_file_name("0_0_0.lemicell"));
+        assert!(!is_temp_file_name(".0_0_0.lemicell.tmp"));
+        assert!(!is_temp_file_name(".x.12a.0123456789abcdef.tmp"));
+        assert!(!is_temp_file_name(".x.12.0123456789abcdeg.tmp"));
+        assert!(!is_temp_file_name("..12.0123456789abcdef.tmp"));
+    }
+
+    /// A temporary file left by a writer that died is removed; one a live writer holds locked,
+    /// one newer than the cut-off and any other file are kept.
+    #[test]
+    fn only_stale_unlocked_temp_files_are_removed() {
+        let dir = std::env::temp_dir().join(format!("lemi-container-s-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let stale = dir.join(".a.lemicell.1.0123456789abcdef.tmp");
+        let live = dir.join(".b.lemicell.2.0123456789abcdef.tmp");
+        let other = dir.join("c.lemicell");
+        for p in [&stale, &live, &other] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        let writer = std::fs::File::open(&live).unwrap();
+        assert!(try_lock(&writer).unwrap());
+        // nothing is older than a cut-off in the past
+        let past = std::time::SystemTime::UNIX_EPOCH;
+        assert_eq!(remove_stale_temp_files(&dir, past).unwrap(), 0);
+        let later = std::time::SystemTime::now() + std::time::Duration::from_secs(1);
+        assert_eq!(remove_stale_temp_files(&dir, later).unwrap(), 1);
+        assert!(!stale.exists() && live.exists() && other.exists());
+        drop(writer);
+        assert_eq!(remove_stale_temp_files(&dir, later).unwrap(), 1);
+        assert!(!live.exists() && other.exists());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -4,13 +4,16 @@
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
-/// Runs `lemi ARGS` (with `XDG_RUNTIME_DIR` set, so Mesa stays quiet) and waits for it.
+/// The command `lemi ARGS`, with `XDG_RUNTIME_DIR` set (so Mesa stays quiet), not yet started.
+pub fn lemi_command<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_lemi"));
+    c.args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir());
+    c
+}
+
+/// Runs `lemi ARGS` and waits for it.
 pub fn lemi(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lemi"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("the lemi binary runs")
+    lemi_command(args).output().expect("the lemi binary runs")
 }
 
 pub fn stderr(o: &Output) -> String {
@@ -99,9 +102,7 @@ pub fn assert_same_bundle(expected: &std::path::Path, got: &std::path::Path) {
 /// Starts `lemi ARGS` without waiting (for processes that must run at the same time).
 #[allow(dead_code)]
 pub fn spawn_lemi(args: &[String]) -> std::process::Child {
-    Command::new(env!("CARGO_BIN_EXE_lemi"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+    lemi_command(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()

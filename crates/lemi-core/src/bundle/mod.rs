@@ -19,7 +19,7 @@ use crate::Face;
 mod params;
 mod reader;
 pub use params::{ParamsError, MAX_LAYERS, MAX_RESOLUTION, MIN_RESOLUTION};
-pub use reader::{read_cell_file, Bundle, CellCheck, VerifiedCell};
+pub use reader::{check_cell_bytes, read_cell_file, Bundle, CellCheck, VerifiedCell};
 
 /// Version of the manifest and cell files of a layered bundle. Readers reject versions other
 /// than this one and [`HLOD_BUNDLE_VERSION`].
@@ -149,8 +149,11 @@ pub struct CellEntry {
     pub blake3: String,
 }
 
-/// `manifest.json`.
+/// `manifest.json`. Written with a checksum of its bytes as the last member, which is not a field
+/// of this type ([`Manifest::encode`], [`Manifest::read`]). Unknown members are an error, so a
+/// damaged member name (`"checksun"`, `"sceme"`) is never silently ignored.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Manifest {
     pub format: String,
     pub version: u32,
@@ -489,12 +492,22 @@ pub fn cell_file_name(id: CellId) -> String {
 impl Manifest {
     /// Reads `manifest.json` and checks its format and version (what [`Bundle::open`] builds
     /// on; use that to read cells).
+    ///
+    /// A manifest with a checksum (every manifest lemi writes now) is used only if the checksum
+    /// is the hash of its bytes; one without (written before the checksum was added) is read
+    /// as it is.
     pub fn read(bundle: &Path) -> Result<Manifest, BundleError> {
         let path = manifest_path(bundle);
         let bytes =
             std::fs::read(&path).map_err(|e| BundleError::new(&path, BundleErrorKind::Io(e)))?;
-        let m: Manifest = serde_json::from_slice(&bytes)
-            .map_err(|e| BundleError::invalid(&path, format!("not a valid lemi manifest: {e}")))?;
+        Manifest::decode(&path, &bytes)
+    }
+
+    /// [`Manifest::read`] of `bytes`, the contents of the manifest at `path` (named in errors).
+    pub fn decode(path: &Path, bytes: &[u8]) -> Result<Manifest, BundleError> {
+        let json = verify_manifest_checksum(bytes).map_err(|e| BundleError::invalid(path, e))?;
+        let m: Manifest = serde_json::from_slice(&json)
+            .map_err(|e| BundleError::invalid(path, format!("not a valid lemi manifest: {e}")))?;
         if m.format != MANIFEST_FORMAT {
             return Err(BundleError::invalid(
                 path,
@@ -513,14 +526,79 @@ impl Manifest {
         Ok(m)
     }
 
+    /// Writes `manifest.json` atomically ([`Manifest::encode`]).
     pub fn write(&self, bundle: &Path) -> Result<(), BundleError> {
         let path = manifest_path(bundle);
-        let json = serde_json::to_vec_pretty(self)
+        let json = self
+            .encode()
             .map_err(|e| BundleError::invalid(&path, e.to_string()))?;
         container::write_atomic(&path, &json)
             .map_err(|e| BundleError::new(path, BundleErrorKind::Io(e)))
     }
+
+    /// The bytes of `manifest.json`: the manifest as pretty JSON whose last member is its
+    /// checksum, `"checksum": "blake3:` and the 64 lowercase hex digits of the BLAKE3 hash of every
+    /// byte of the file before `"checksum"`, then `"`, a newline and the closing `}`
+    /// (`docs/FORMAT.md`). Any byte changed (whitespace too) or cut off is detected.
+    pub fn encode(&self) -> Result<Vec<u8>, serde_json::Error> {
+        let mut out = serde_json::to_vec_pretty(self)?;
+        // Pretty JSON of an object with members ends with its last member, a newline and `}`.
+        out.truncate(out.len().saturating_sub(MEMBERS_END.len()));
+        out.extend_from_slice(b",\n  ");
+        let hash = blake3::hash(&out);
+        out.extend_from_slice(CHECKSUM_OPEN);
+        out.extend_from_slice(hash.to_hex().as_bytes());
+        out.extend_from_slice(CHECKSUM_CLOSE);
+        Ok(out)
+    }
 }
+
+/// How the manifest's checksum member starts, after the separator `,\n  ` that ends the hashed
+/// bytes; 64 lowercase hex digits and [`CHECKSUM_CLOSE`] follow and end the file.
+const CHECKSUM_OPEN: &[u8] = b"\"checksum\": \"blake3:";
+const CHECKSUM_CLOSE: &[u8] = b"\"\n}";
+/// How pretty JSON of an object ends after its last member.
+const MEMBERS_END: &[u8] = b"\n}";
+const CHECKSUM_TAIL: usize = CHECKSUM_OPEN.len() + 64 + CHECKSUM_CLOSE.len();
+
+/// Checks the checksum of the bytes of a manifest and returns its JSON without the checksum
+/// member. A manifest without one (written before it was added) is returned as it is, unless
+/// it names a `checksum` anywhere: then the checksum is damaged or was moved, and the manifest
+/// is refused.
+fn verify_manifest_checksum(bytes: &[u8]) -> Result<std::borrow::Cow<'_, [u8]>, String> {
+    if let Some(hashed_len) = bytes.len().checked_sub(CHECKSUM_TAIL) {
+        let (hashed, tail) = bytes.split_at(hashed_len);
+        let hex = &tail[CHECKSUM_OPEN.len()..CHECKSUM_OPEN.len() + 64];
+        if tail.starts_with(CHECKSUM_OPEN)
+            && tail.ends_with(CHECKSUM_CLOSE)
+            && hex.iter().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+        {
+            if blake3::hash(hashed).to_hex().as_bytes() != hex {
+                return Err(MANIFEST_CHECKSUM_MISMATCH.into());
+            }
+            // The hash matched, so these are the bytes lemi wrote: the members, then `,\n  `.
+            let members = hashed
+                .strip_suffix(b",\n  ")
+                .ok_or_else(|| format!("{MANIFEST_CHECKSUM_MISPLACED} (no member before it)"))?;
+            let mut json = members.to_vec();
+            json.extend_from_slice(MEMBERS_END);
+            return Ok(std::borrow::Cow::Owned(json));
+        }
+    }
+    if bytes.windows(10).any(|w| w == b"\"checksum\"") {
+        return Err(MANIFEST_CHECKSUM_MISPLACED.into());
+    }
+    Ok(std::borrow::Cow::Borrowed(bytes))
+}
+
+const MANIFEST_CHECKSUM_MISMATCH: &str =
+    "corrupt: checksum mismatch (the manifest was modified or \
+     damaged after baking); run the same `lemi bake` again (or `lemi bake --merge` for a sharded \
+     bake) to write it anew: intact cells are kept";
+const MANIFEST_CHECKSUM_MISPLACED: &str = "corrupt: its `checksum` is damaged or not where lemi \
+     writes it (the last member, `\"checksum\": \"blake3:` and 64 lowercase hex digits); run the \
+     same `lemi bake` again (or `lemi bake --merge` for a sharded bake) to write it anew: intact \
+     cells are kept";
 
 /// A decoded cell file.
 #[derive(Clone, Debug, PartialEq)]

@@ -47,9 +47,19 @@ pub struct VerifiedCell {
 /// Reads the cell file at `path` and runs every check of `check` on it (steps 2–6 of the module
 /// docs).
 pub fn read_cell_file(path: &Path, check: &CellCheck) -> Result<VerifiedCell, BundleError> {
+    let bytes = std::fs::read(path).map_err(|e| BundleError::new(path, BundleErrorKind::Io(e)))?;
+    check_cell_bytes(path, &bytes, check)
+}
+
+/// Runs every check of `check` on `bytes`, the contents of the cell file at `path` (steps 3–6 of
+/// the module docs; errors name `path`).
+pub fn check_cell_bytes(
+    path: &Path,
+    bytes: &[u8],
+    check: &CellCheck,
+) -> Result<VerifiedCell, BundleError> {
     let fail = |kind| BundleError::new(path, kind);
-    let bytes = std::fs::read(path).map_err(|e| fail(BundleErrorKind::Io(e)))?;
-    let hash = blake3::hash(&bytes).to_hex().to_string();
+    let hash = blake3::hash(bytes).to_hex().to_string();
     if let Some(entry) = check.entry {
         if bytes.len() as u64 != entry.bytes {
             return Err(fail(BundleErrorKind::Size {
@@ -61,7 +71,7 @@ pub fn read_cell_file(path: &Path, check: &CellCheck) -> Result<VerifiedCell, Bu
             return Err(fail(BundleErrorKind::Hash));
         }
     }
-    let file = CellFile::decode(&bytes).map_err(|e| fail(BundleErrorKind::Container(e)))?;
+    let file = CellFile::decode(bytes).map_err(|e| fail(BundleErrorKind::Container(e)))?;
     if file.header.params_hash != check.params_hash {
         return Err(fail(BundleErrorKind::Params {
             found: file.header.params_hash.clone(),
@@ -429,6 +439,78 @@ mod tests {
         assert!(Bundle::open(&dir).is_err());
         let e = Bundle::open(&dir.join("missing")).unwrap_err();
         assert!(matches!(e.kind, BundleErrorKind::Io(_)), "{e}");
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn the_manifest_ends_with_the_checksum_of_its_bytes() {
+        let (dir, manifest, _) = bundle();
+        let bytes = std::fs::read(manifest_path(&dir)).unwrap();
+        assert_eq!(bytes, manifest.encode().unwrap());
+        let text = String::from_utf8(bytes.clone()).unwrap();
+        let at = text.rfind("\"checksum\": \"blake3:").unwrap();
+        let hex = &text[at + 20..at + 84];
+        assert_eq!(&text[at + 84..], "\"\n}");
+        assert_eq!(blake3::hash(&bytes[..at]).to_hex().as_str(), hex);
+        assert!(text[..at].ends_with(",\n  "));
+        // still JSON, the checksum one more member
+        let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+        assert_eq!(v["checksum"], format!("blake3:{hex}"));
+        assert_eq!(Manifest::read(&dir).unwrap(), manifest);
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn a_manifest_written_before_the_checksum_still_reads() {
+        let (dir, manifest, _) = bundle();
+        // what `Manifest::write` wrote before the checksum was added
+        std::fs::write(
+            manifest_path(&dir),
+            serde_json::to_vec_pretty(&manifest).unwrap(),
+        )
+        .unwrap();
+        let b = Bundle::open(&dir).unwrap();
+        assert_eq!(b.manifest(), &manifest);
+        assert!(b.cell(id("1_0_2")).is_ok());
+        // but not one that names a checksum lemi did not write
+        let mut v = serde_json::to_value(&manifest).unwrap();
+        v["checksum"] = "blake3:00".into();
+        std::fs::write(manifest_path(&dir), serde_json::to_vec_pretty(&v).unwrap()).unwrap();
+        let e = Bundle::open(&dir).unwrap_err();
+        assert!(e.to_string().contains("`checksum` is damaged"), "{e}");
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// Every single-byte change (all 255 other values at every position) and every truncation of
+    /// a manifest is an error naming it: the checksum covers every byte, whitespace included.
+    #[test]
+    fn every_byte_change_and_truncation_of_the_manifest_is_detected() {
+        let (dir, _, _) = bundle();
+        let path = manifest_path(&dir);
+        let good = std::fs::read(&path).unwrap();
+        let mut checked = 0;
+        let mut damaged = Vec::with_capacity(good.len());
+        let mut expect_error = |bytes: &[u8], what: &dyn Fn() -> String| {
+            // `Bundle::open` of these bytes, without writing each to disk
+            match Manifest::decode(&path, bytes).and_then(|m| Bundle::from_manifest(&dir, m)) {
+                Ok(_) => panic!("{} accepted", what()),
+                Err(e) => assert!(e.path == path, "{}: {e}", what()),
+            }
+            checked += 1;
+        };
+        for at in 0..good.len() {
+            for value in 0..=255u8 {
+                if value == good[at] {
+                    continue;
+                }
+                damaged.clear();
+                damaged.extend_from_slice(&good);
+                damaged[at] = value;
+                expect_error(&damaged, &|| format!("byte {at} set to {value:#04x}"));
+            }
+            expect_error(&good[..at], &|| format!("cut to {at} bytes"));
+        }
+        assert_eq!(checked, good.len() * 256);
         std::fs::remove_dir_all(dir).ok();
     }
 
