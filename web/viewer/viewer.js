@@ -17,7 +17,7 @@
 //
 // URL parameters: eye=x,y,z  dir=x,y,z (or yaw=, pitch= in degrees; yaw 0 looks along −Z, 90
 // along +X)  fov=60 (vertical, degrees)  size=WxH (fixed canvas size)  hud=0  tint=1 (layers
-// coloured)  walk=1 (walk the cells automatically, for the benchmark)  speed=5 (m/s).
+// coloured)  transparent=1 (no page background behind the canvas)  walk=1 (walk the cells automatically, for the benchmark)  speed=5 (m/s).
 // Keys: WASD move, Q/E down/up, shift faster, mouse drag (or pointer lock on click) looks,
 // L toggles the layer colouring, N the near geometry, H the HUD.
 // window.lemi exposes the state for tests: ready, frame times, loaded cells, errors.
@@ -36,6 +36,11 @@ const FACE_NAMES = ['+X', '-X', '+Y', '-Y', '+Z', '-Z'];
 
 const params = new URLSearchParams(location.search);
 const hud = document.getElementById('hud');
+if (params.get('transparent') === '1') {
+  // the page shows nothing behind the canvas: screenshots keep the canvas's alpha (coverage)
+  document.documentElement.style.background = 'transparent';
+  document.body.style.background = 'transparent';
+}
 const status = {
   ready: false, error: null, frames: 0, frameTimes: [], currentCell: null, shownCell: null,
   loadedCells: [], fetchedBytes: 0, residentBytes: 0, stalls: 0,
@@ -238,6 +243,66 @@ function lemiQuads(mesh, info) {
   return m;
 }
 
+const SRGB_TO_LINEAR = Array.from({ length: 256 }, (_, i) => {
+  const c = i / 255;
+  return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
+});
+
+function linearToSrgb(v) {
+  v = Number.isNaN(v) ? 0 : Math.min(Math.max(v, 0), 1);
+  const s = v <= 0.0031308 ? v * 12.92 : 1.055 * v ** (1 / 2.4) - 0.055;
+  return Math.floor(s * 255 + 0.5);
+}
+
+const nearTextures = new WeakMap();
+
+/// A scene texture with lemi's mip chain (crates/lemi-gpu/src/texture.rs: each level's texel the
+/// average of the 2×2 texels it covers, colour in linear space, alpha linearly), so that the
+/// filtered near geometry samples the levels lemi samples.
+function lemiMipmapped(map) {
+  if (nearTextures.has(map)) return nearTextures.get(map);
+  const { width, height } = map.image;
+  const canvas = new OffscreenCanvas(width, height);
+  const ctx = canvas.getContext('2d', { colorSpace: 'srgb', willReadFrequently: true });
+  ctx.drawImage(map.image, 0, 0);
+  let level = { width, height, data: new Uint8Array(ctx.getImageData(0, 0, width, height).data.buffer) };
+  const mipmaps = [level];
+  while (level.width > 1 || level.height > 1) {
+    const w = Math.max(level.width >> 1, 1);
+    const h = Math.max(level.height >> 1, 1);
+    const out = new Uint8Array(w * h * 4);
+    for (let y = 0; y < h; y++) {
+      for (let x = 0; x < w; x++) {
+        const acc = [0, 0, 0, 0];
+        for (const [dx, dy] of [[0, 0], [1, 0], [0, 1], [1, 1]]) {
+          const sx = Math.min(2 * x + dx, level.width - 1);
+          const sy = Math.min(2 * y + dy, level.height - 1);
+          const i = (sy * level.width + sx) * 4;
+          for (let c = 0; c < 3; c++) acc[c] += SRGB_TO_LINEAR[level.data[i + c]];
+          acc[3] += level.data[i + 3];
+        }
+        const o = (y * w + x) * 4;
+        for (let c = 0; c < 3; c++) out[o + c] = linearToSrgb(acc[c] / 4);
+        out[o + 3] = Math.floor(acc[3] / 4 + 0.5);
+      }
+    }
+    level = { width: w, height: h, data: out };
+    mipmaps.push(level);
+  }
+  const t = new THREE.DataTexture(mipmaps[0].data, width, height, THREE.RGBAFormat);
+  t.mipmaps = mipmaps;
+  t.colorSpace = THREE.SRGBColorSpace;
+  t.wrapS = map.wrapS;
+  t.wrapT = map.wrapT;
+  t.magFilter = THREE.LinearFilter;
+  t.minFilter = THREE.LinearMipmapLinearFilter;
+  t.generateMipmaps = false;
+  t.flipY = false;
+  t.needsUpdate = true;
+  nearTextures.set(map, t);
+  return t;
+}
+
 /// A near primitive with lemi's shading.
 function lemiNear(mesh) {
   const src = mesh.material;
@@ -262,7 +327,7 @@ function lemiNear(mesh) {
     uniforms: {
       // three keeps baseColorFactor linear in material.color and the alpha in opacity
       baseColor: { value: new THREE.Vector4(src.color.r, src.color.g, src.color.b, src.opacity) },
-      map: { value: src.map || null },
+      map: { value: src.map ? lemiMipmapped(src.map) : null },
       lightDir: { value: l },
       sun: { value: new THREE.Vector3(0.7, 0.7, 0.7) },
       ambient: { value: new THREE.Vector3(0.3, 0.3, 0.3) },
