@@ -139,7 +139,9 @@ pub fn export_cell(
                 json::Texture {
                     name: Some(format!("macro{i}")),
                     sampler: Some(sampler),
-                    source: image,
+                    // no core source: the KTX2 image is reachable only through the required
+                    // extension (gltf-json leaves out a source of u32::MAX)
+                    source: json::Index::new(u32::MAX),
                     extensions: Some(ext),
                     extras: Default::default(),
                 }
