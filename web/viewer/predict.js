@@ -85,6 +85,14 @@ function indexAt(grid, p) {
 
 const MAX_CANDIDATES = 100000;
 
+/// Rust's f64::total_cmp for the numbers met here (finite): −0 before +0.
+function totalCmp(a, b) {
+  if (a < b) return -1;
+  if (a > b) return 1;
+  if (a === 0 && b === 0) return (Object.is(b, -0) ? 1 : 0) - (Object.is(a, -0) ? 1 : 0);
+  return 0;
+}
+
 /// The cells to have ready at `position` moving with `velocity`: [{index, id, arrival, distance}],
 /// the current cell first, then by arrival time, distance, how far the cell's centre lies in the
 /// direction of motion, then grid index (y, z, x).
@@ -123,9 +131,9 @@ export function predict(position, velocity, grid, rule) {
   }
   out.sort((p, q) =>
     (q.current - p.current)
-    || (p.arrival - q.arrival)
-    || (p.distance - q.distance)
-    || (dot(v, sub(q.center, position)) - dot(v, sub(p.center, position)))
+    || totalCmp(p.arrival, q.arrival)
+    || totalCmp(p.distance, q.distance)
+    || totalCmp(dot(v, sub(q.center, position)), dot(v, sub(p.center, position)))
     || (p.index[1] - q.index[1]) || (p.index[2] - q.index[2]) || (p.index[0] - q.index[0]));
   return out.slice(0, rule.max_cells);
 }

@@ -220,3 +220,88 @@ fn the_browser_shows_what_lemi_renders() {
         );
     }
 }
+
+#[test]
+fn the_viewer_predicts_as_the_runtime() {
+    let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../web");
+    if Command::new("node").arg("--version").output().is_err() {
+        lemi_testkit::skip("node is not installed (.ci/run installs it)");
+        return;
+    }
+    use glam::DVec3;
+    use lemi_core::cell::CellGrid;
+    use lemi_core::Aabb;
+    // 7 × 2 × 5 cells of 10 m × 4 m, off the origin
+    let grid = CellGrid::tile_with_height(
+        Aabb::new(DVec3::new(-30.0, 0.5, -20.0), DVec3::new(38.0, 7.5, 27.0)),
+        10.0,
+        Some(4.0),
+    )
+    .unwrap();
+    let options = lemi_runtime::PredictOptions::default();
+    let rule = lemi_export::PredictionRule {
+        horizon_seconds: options.horizon_seconds,
+        max_speed: options.max_speed,
+        max_acceleration: options.max_acceleration,
+        max_cells: options.max_cells,
+        ..Default::default()
+    };
+    // positions inside, on borders and outside; standing, walking, running, flying up
+    let mut cases = Vec::new();
+    let mut seed = 7u64;
+    let mut rand = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for k in 0..60 {
+        let p = DVec3::new(
+            -40.0 + 90.0 * rand(),
+            -2.0 + 12.0 * rand(),
+            -30.0 + 70.0 * rand(),
+        );
+        let p = if k % 7 == 0 { p.round() } else { p }; // on cell borders too
+        let speed = [0.0, 1.5, 5.0, 14.0][k % 4];
+        let v = DVec3::new(rand() - 0.5, 0.2 * (rand() - 0.5), rand() - 0.5).normalize() * speed;
+        cases.push((p, v));
+    }
+    let input = serde_json::json!({
+        "grid": {
+            "origin": grid.origin.to_array(),
+            "step": grid.step().to_array(),
+            "counts": grid.counts.to_array(),
+        },
+        "rule": rule,
+        "cases": cases.iter().map(|(p, v)| serde_json::json!({
+            "position": p.to_array(), "velocity": v.to_array()
+        })).collect::<Vec<_>>(),
+    });
+    let mut child = Command::new("node")
+        .arg(web.join("tools/predict_cases.mjs"))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.to_string().as_bytes())
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let js: Vec<Vec<String>> = serde_json::from_slice(&o.stdout).unwrap();
+    let mut listed = 0;
+    for ((p, v), js) in cases.iter().zip(&js) {
+        let rust: Vec<String> = lemi_runtime::predict(*p, *v, &grid, &options)
+            .iter()
+            .map(|c| c.cell.id().to_string())
+            .collect();
+        assert_eq!(&rust, js, "at {p} moving {v}");
+        listed += rust.len();
+    }
+    assert!(listed > 100, "the cases list cells ({listed})");
+}
