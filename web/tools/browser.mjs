@@ -5,7 +5,7 @@
 // object. Exit codes: 0 done, 1 the viewer failed (its error is printed), 3 the browser could not
 // start (tests skip on it, with the reason).
 //
-// usage: node browser.mjs URL [--screenshot OUT.png] [--bench SECONDS] [--size 960x540]
+// usage: node browser.mjs URL [--screenshot OUT.png] [--bench SECONDS [--warmup SECONDS]] [--size 960x540]
 // Software WebGL: SwiftShader through ANGLE. LEMI_CHROMIUM overrides /usr/bin/chromium.
 import { chromium } from 'playwright-core';
 
@@ -22,6 +22,7 @@ if (!url) {
 const [width, height] = opt('--size', '960x540').split('x').map(Number);
 const shot = opt('--screenshot', null);
 const bench = Number(opt('--bench', '0'));
+const warmup = Number(opt('--warmup', '0'));
 const timeout = Number(opt('--timeout', '180')) * 1000;
 
 let browser;
@@ -58,6 +59,8 @@ try {
     out.screenshot = shot;
   }
   if (bench > 0) {
+    // let the streaming settle (every predicted cell fetched, parsed and uploaded) first
+    await page.waitForTimeout(warmup * 1000);
     const start = await page.evaluate(() => window.lemi.frameTimes.length);
     await page.waitForTimeout(bench * 1000);
     const r = await page.evaluate((s) => ({
@@ -70,6 +73,7 @@ try {
     const sum = r.times.reduce((a, b) => a + b, 0);
     out.bench = {
       seconds: bench,
+      warmup_seconds: warmup,
       frames: t.length,
       fps_mean: t.length ? (1000 * t.length) / sum : 0,
       frame_ms_median: t.length ? t[Math.floor(t.length / 2)] : null,

@@ -93,7 +93,9 @@ out vec4 outColor;
 void main() {
   vec2 t = clamp(floor(vTexel), vRect.xy, vRect.zw - 1.0);
   vec4 c = texelFetch(map, ivec2(t), 0);
+#ifndef OPAQUE
   if (c.a < cutoff) discard;
+#endif
   vec3 rgb = c.rgb;
   if (tint) rgb = mix(rgb, palette[vLayer % 10], 0.6);
   outColor = vec4(rgb, 1.0);
@@ -228,6 +230,9 @@ function lemiQuads(mesh, info) {
     glslVersion: THREE.GLSL3,
     vertexShader: QUAD_VERTEX,
     fragmentShader: QUAD_FRAGMENT,
+    // quads whose texels all pass the alpha test are drawn without it (alphaMode OPAQUE), so
+    // the depth test comes before shading
+    defines: mesh.material.alphaTest > 0 ? {} : { OPAQUE: 1 },
     uniforms: {
       map: { value: map },
       cutoff: { value: mesh.material.alphaTest || 0.5 },
@@ -389,7 +394,8 @@ async function main() {
   const renderer = new THREE.WebGLRenderer({
     antialias: false,
     alpha: true,
-    preserveDrawingBuffer: true,
+    // screenshots capture the composited page, so the drawing buffer need not be kept
+    preserveDrawingBuffer: params.get('preserve') === '1',
     reversedDepthBuffer: true,
     powerPreference: 'high-performance',
   });
@@ -534,6 +540,7 @@ async function main() {
   let fpsStart = last;
   let fps = 0;
   let tick = 0;
+  let hudUpdated = 0;
 
   function frame(now) {
     const dt = Math.min((now - last) / 1000, 0.25);
@@ -613,7 +620,9 @@ async function main() {
       // two frames after the current cell is shown: its textures are uploaded and drawn
       if (status.readyFrames >= 2) status.ready = true;
     }
-    if (showHud) {
+    if (showHud && now - hudUpdated >= 250) {
+      // four times a second: rewriting the text re-lays out the page
+      hudUpdated = now;
       hud.textContent = [
         `fps      ${fps.toFixed(1)}`,
         `cell     ${hereId || 'outside the grid'}${shown && hereId !== status.shownCell ? ` (showing ${status.shownCell}, loading)` : ''}`,

@@ -6,8 +6,8 @@
 //! of textured quads, alpha-tested and depth-tested against each other and the near geometry, so
 //! any renderer with an alpha test draws it without sorting. In glTF 2.0 terms:
 //!
-//! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture (in
-//!   `header.macros` order), each quad four vertices (its corners in the order of
+//! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture and
+//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices (its corners in the order of
 //!   [`Quad::corners`], world coordinates, f32 as the bundle computes them) and two triangles
 //!   `0 1 2, 0 2 3`. Within a primitive the quads are in the runtime's draw order: by cube face,
 //!   then the nearest layer first (a quad's `layer` counts far to near), ties in the cell's order,
@@ -15,7 +15,9 @@
 //!   [`Quad::macro_texel_corners`] divided by the macro-texture's size (exact in f32: texel edges
 //!   of textures up to 2¹⁶ texels); a reader gets the quad's texel rectangle back by multiplying.
 //! - **Materials**: `KHR_materials_unlit` (the layers are pre-shaded, final sRGB colours),
-//!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test),
+//!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test), or
+//!   `OPAQUE` for the quads whose texels all pass it ([`opaque_quads`]: as the runtime's opaque
+//!   pipeline, so a renderer can test depth before shading; a separate primitive per kind),
 //!   double-sided, base colour factor 1, metallic 0, roughness 1 (what an unlit-unaware reader
 //!   falls back to), the macro-texture as base colour texture through a nearest-texel,
 //!   clamp-to-edge sampler (the runtime fetches texels, it never filters).
@@ -62,13 +64,47 @@ pub struct CellGlb {
     pub near_bytes: u64,
 }
 
-/// The order the quads of one primitive are written in: by face, then the nearest layer first,
-/// ties in the cell's order (the runtime's order within a draw call, `lemi_gpu::impostor`).
-pub fn quad_order(quads: &[Quad]) -> Vec<usize> {
+/// Whether each quad's texels (its rectangle of its macro-texture) all pass the alpha test, so
+/// it can be drawn without it (`alphaMode: OPAQUE`): as the runtime's opaque pipeline, this lets
+/// a renderer test depth before shading.
+pub fn opaque_quads(file: &CellFile) -> Result<Vec<bool>, ExportError> {
+    let macros = file
+        .decode_macros()
+        .map_err(|e| ExportError::Gltf(format!("decoding the macro-textures: {e}")))?;
+    // the smallest alpha byte the test keeps: a / 255 ≥ cutoff
+    let keep = (0..=255u8)
+        .find(|&a| a as f32 / 255.0 >= QUAD_ALPHA_CUTOFF)
+        .unwrap_or(255);
+    Ok(file
+        .header
+        .quads
+        .iter()
+        .map(|q| {
+            let Some(m) = macros.get(q.macro_index as usize) else {
+                return false;
+            };
+            let [x, y, w, h] = q.rect.map(|v| v as usize);
+            let stride = 4 * m.width as usize;
+            (y..y + h).all(|row| {
+                let start = row * stride + 4 * x;
+                m.rgba
+                    .get(start..start + 4 * w)
+                    .is_some_and(|px| px.chunks_exact(4).all(|t| t[3] >= keep))
+            })
+        })
+        .collect())
+}
+
+/// The order the quads are written in: one primitive per macro-texture and kind (opaque quads
+/// before alpha-tested ones), within it by face, then the nearest layer first (a quad's `layer`
+/// counts far to near), ties in the cell's order: the runtime's order within a draw call
+/// (`lemi_gpu::impostor`), so depth rejection skips what nearer layers hide.
+pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
     let mut order: Vec<usize> = (0..quads.len()).collect();
     order.sort_by_key(|&k| {
         (
             quads[k].macro_index,
+            !opaque.get(k).copied().unwrap_or(false),
             quads[k].face,
             std::cmp::Reverse(quads[k].layer),
         )
@@ -148,20 +184,25 @@ pub fn export_cell(
             }
         };
         let texture = doc.root.push(texture);
-        materials.push(doc.root.push(quad_material(texture, i)));
+        materials.push([
+            doc.root.push(quad_material(texture, i, true)),
+            doc.root.push(quad_material(texture, i, false)),
+        ]);
     }
 
     // quads: one primitive per macro-texture, in the runtime's order
     let quads = &header.quads;
-    let order = quad_order(quads);
+    let opaque = opaque_quads(file)?;
+    let order = quad_order(quads, &opaque);
     let mut primitives = Vec::new();
     let mut start = 0;
     while start < order.len() {
         let m = quads[order[start]].macro_index;
+        let kind = opaque[order[start]];
         let end = start
             + order[start..]
                 .iter()
-                .take_while(|&&k| quads[k].macro_index == m)
+                .take_while(|&&k| quads[k].macro_index == m && opaque[k] == kind)
                 .count();
         let info = header.macros.get(m as usize).ok_or_else(|| {
             ExportError::Gltf(format!("a quad uses macro-texture {m}, the cell has fewer"))
@@ -184,7 +225,9 @@ pub fn export_cell(
         let position = doc.positions(&positions);
         let uv = doc.texcoords(&uvs);
         let index = doc.indices(&indices, positions.len());
-        let material = materials.get(m as usize).copied();
+        let material = materials
+            .get(m as usize)
+            .map(|pair| pair[usize::from(!kind)]);
         primitives.push(primitive(
             [
                 (json::mesh::Semantic::Positions, position),
@@ -359,12 +402,22 @@ pub(crate) fn encode_png(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>
     Ok(out)
 }
 
-fn quad_material(texture: json::Index<json::Texture>, i: usize) -> json::Material {
+/// The material of macro-texture `i`'s quads: alpha-tested (`MASK`), or `opaque` for quads whose
+/// texels all pass the test.
+fn quad_material(texture: json::Index<json::Texture>, i: usize, opaque: bool) -> json::Material {
     json::Material {
-        alpha_cutoff: Some(json::material::AlphaCutoff(QUAD_ALPHA_CUTOFF)),
-        alpha_mode: Valid(json::material::AlphaMode::Mask),
+        alpha_cutoff: (!opaque).then_some(json::material::AlphaCutoff(QUAD_ALPHA_CUTOFF)),
+        alpha_mode: Valid(if opaque {
+            json::material::AlphaMode::Opaque
+        } else {
+            json::material::AlphaMode::Mask
+        }),
         double_sided: true,
-        name: Some(format!("macro{i}")),
+        name: Some(if opaque {
+            format!("macro{i}-opaque")
+        } else {
+            format!("macro{i}")
+        }),
         pbr_metallic_roughness: json::material::PbrMetallicRoughness {
             base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
             base_color_texture: Some(json::texture::Info {

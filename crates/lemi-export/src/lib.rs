@@ -17,7 +17,7 @@ use lemi_core::bundle::{Bundle, BundleError};
 use lemi_core::cell::CellId;
 use lemi_core::Scene;
 
-pub use cell_gltf::{export_cell, quad_order, CellGlb, CellOptions};
+pub use cell_gltf::{export_cell, opaque_quads, quad_order, CellGlb, CellOptions};
 pub use index::{CellIndexEntry, ExportIndex, PredictionRule, INDEX_FILE, INDEX_FORMAT};
 
 /// How the macro-textures are stored in the exported files.
