@@ -5,7 +5,7 @@
 // object. Exit codes: 0 done, 1 the viewer failed (its error is printed), 3 the browser could not
 // start (tests skip on it, with the reason).
 //
-// usage: node browser.mjs URL [--screenshot OUT.png] [--bench SECONDS [--warmup SECONDS]] [--size 960x540]
+// usage: node browser.mjs URL [--screenshot OUT.png|.jpg [--delay SECONDS]] [--bench SECONDS [--warmup SECONDS]] [--size 960x540]
 // Software WebGL: SwiftShader through ANGLE. LEMI_CHROMIUM overrides /usr/bin/chromium.
 import { chromium } from 'playwright-core';
 
@@ -55,6 +55,7 @@ try {
   Object.assign(out, state);
   if (state.error) throw new Error(`the viewer failed: ${state.error}`);
   if (shot) {
+    await page.waitForTimeout(Number(opt('--delay', '0')) * 1000);
     await page.screenshot({ path: shot, omitBackground: true, clip: { x: 0, y: 0, width, height }, timeout });
     out.screenshot = shot;
   }
