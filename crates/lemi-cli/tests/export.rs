@@ -364,6 +364,11 @@ fn missing_damaged_and_foreign_bundles_are_clear_errors() {
         &export(&bundle, &out, &["--cells", "0_0_0", "--textures", "ktx2"]),
         &["--textures ktx2", "bc7"],
     );
+    // lemi serve on something that is neither a bundle nor an export
+    assert_clean_error_all(
+        &lemi(&["serve", empty.to_str().unwrap(), "--port", "0"]),
+        &["empty", "neither a bundle", "cells.json"],
+    );
     // the cells before the damaged one were exported, and the index is not written over a
     // partial export
     assert!(!out.join("cells.json").exists());

@@ -27,10 +27,12 @@ pub(crate) enum ViewKind {
 
 impl Document {
     pub(crate) fn new(generator: &str) -> Document {
-        let mut root = json::Root::default();
-        root.asset = json::Asset {
-            version: "2.0".into(),
-            generator: Some(generator.into()),
+        let root = json::Root {
+            asset: json::Asset {
+                version: "2.0".into(),
+                generator: Some(generator.into()),
+                ..Default::default()
+            },
             ..Default::default()
         };
         Document {
