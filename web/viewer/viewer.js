@@ -19,7 +19,7 @@
 // along +X)  fov=60 (vertical, degrees)  size=WxH (fixed canvas size)  hud=0  tint=1 (layers
 // coloured)  transparent=1 (no page background behind the canvas)  walk=1 (walk the cells automatically, for the benchmark)  speed=5 (m/s).
 // Keys: WASD move, Q/E down/up, shift faster, mouse drag (or pointer lock on click) looks,
-// L toggles the layer colouring, N the near geometry, H the HUD.
+// F fly/walk, L toggles the layer colouring, N the near geometry, H the HUD.
 // window.lemi exposes the state for tests: ready, frame times, loaded cells, errors.
 
 import * as THREE from 'three';
@@ -476,6 +476,10 @@ async function main() {
   // input
   const held = new Set();
   let tint = quadUniforms.tint.value;
+  // fly (W follows the pitch, Q/E down/up) or walk (horizontal at the eye height walking was
+  // switched on at), as `lemi view`
+  let walking = false;
+  let walkHeight = eye[1];
   let showNear = params.get('near') !== '0';
   let showHud = params.get('hud') !== '0';
   hud.classList.toggle('hidden', !showHud);
@@ -484,6 +488,7 @@ async function main() {
     if (e.code === 'KeyL') { tint = !tint; quadUniforms.tint.value = tint; nearUniforms.grey.value = tint; }
     if (e.code === 'KeyN') showNear = !showNear;
     if (e.code === 'KeyH') { showHud = !showHud; hud.classList.toggle('hidden', !showHud); }
+    if (e.code === 'KeyF') { walking = !walking; walkHeight = eye[1]; }
   });
   addEventListener('keyup', (e) => held.delete(e.code));
   let dragging = false;
@@ -560,15 +565,18 @@ async function main() {
       const v = speed * fast * dt;
       const y = (yaw * Math.PI) / 180;
       const p = (pitch * Math.PI) / 180;
-      const fwd = [Math.sin(y) * Math.cos(p), Math.sin(p), -Math.cos(y) * Math.cos(p)];
+      const fwd = walking
+        ? [Math.sin(y), 0, -Math.cos(y)]
+        : [Math.sin(y) * Math.cos(p), Math.sin(p), -Math.cos(y) * Math.cos(p)];
       const right = [Math.cos(y), 0, Math.sin(y)];
       const move = (d, s) => { eye = [0, 1, 2].map((k) => eye[k] + d[k] * s); };
       if (held.has('KeyW')) move(fwd, v);
       if (held.has('KeyS')) move(fwd, -v);
       if (held.has('KeyD')) move(right, v);
       if (held.has('KeyA')) move(right, -v);
-      if (held.has('KeyE')) move([0, 1, 0], v);
-      if (held.has('KeyQ')) move([0, 1, 0], -v);
+      if (!walking && held.has('KeyE')) move([0, 1, 0], v);
+      if (!walking && held.has('KeyQ')) move([0, 1, 0], -v);
+      if (walking) eye[1] = walkHeight;
       if (held.has('ArrowLeft')) yaw -= 90 * dt;
       if (held.has('ArrowRight')) yaw += 90 * dt;
       if (held.has('ArrowUp')) pitch = Math.min(89, pitch + 90 * dt);
@@ -632,7 +640,7 @@ async function main() {
         `loaded   ${status.loadedCells.length} cells: ${status.loadedCells.join(' ')}`,
         `bytes    ${(status.residentBytes / 1e6).toFixed(2)} MB resident, ${(status.fetchedBytes / 1e6).toFixed(2)} MB fetched`,
         shown && shown.info ? `quads    ${shown.info.quads}, near triangles ${shown.info.near_triangles}, layers ${shown.info.layer_count.join('/')}` : '',
-        `keys     WASD QE move, drag/click to look, L layers${tint ? ' (on)' : ''}, N near${showNear ? '' : ' (off)'}, H HUD`,
+        `keys     WASD QE move, drag/click to look, F ${walking ? 'walk (on)' : 'fly'}, L layers${tint ? ' (on)' : ''}, N near${showNear ? '' : ' (off)'}, H HUD`,
       ].join('\n');
     }
     requestAnimationFrame(frame);
