@@ -6,13 +6,16 @@ mod cmd_bake;
 mod cmd_compare;
 mod cmd_demo;
 mod cmd_eval;
+mod cmd_export;
 mod cmd_info;
 mod cmd_layers;
 mod cmd_render;
+mod cmd_serve;
 mod cmd_view;
 mod cmd_walk;
 mod load;
 mod strategy;
+mod web;
 
 use clap::{Parser, Subcommand};
 
@@ -40,6 +43,10 @@ enum Command {
     Walk(cmd_walk::Args),
     /// Fly or walk through a bundle in a window: HUD, impostors/geometry and layer toggles, path recording.
     View(cmd_view::Args),
+    /// Export a bundle to glTF 2.0: one .glb per view cell plus cells.json (engines, the web viewer).
+    Export(cmd_export::Args),
+    /// Open a bundle in the web viewer: export it, then serve the viewer on localhost.
+    Serve(cmd_serve::Args),
     /// Compute the layer placement of a view cell (the error metric).
     Layers(cmd_layers::Args),
     /// Run every far-field strategy (lemi, cubemap, equidistant, warp, dynamic) on one scene: tables, plots.
@@ -58,6 +65,8 @@ fn main() {
         Command::Walk(a) => cmd_walk::run(a),
         Command::View(a) => cmd_view::run(a),
         Command::Compare(a) => cmd_compare::run(a),
+        Command::Export(a) => cmd_export::run(a),
+        Command::Serve(a) => cmd_serve::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", error_chain(&e));

@@ -42,6 +42,10 @@ pub fn version_for(params: &BakeParams) -> u32 {
         _ => BUNDLE_VERSION,
     }
 }
+/// The alpha test of the impostor quads: a macro-texel whose alpha (0..=1) is below this is not
+/// drawn. Macro-texels are baked with alpha 0 or 255 and every texture format keeps each texel on
+/// its side of it; the runtime's quad shader and the glTF export (`alphaCutoff`) both use it.
+pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
 /// Magic bytes of a cell file.
 pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
 /// `format` field of the manifest.

@@ -19,8 +19,9 @@ use crate::GpuError;
 /// which every adapter but downlevel ones (WebGL2: 2048) has.
 pub const DEFAULT_PAGE_SIDE: u32 = 8192;
 
-/// Quad fragments whose macro-texel alpha (0..=1) is below this are discarded.
-pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+/// Quad fragments whose macro-texel alpha (0..=1) is below this are discarded (the bundle's
+/// alpha test, [`lemi_core::bundle::QUAD_ALPHA_CUTOFF`]).
+pub use lemi_core::bundle::QUAD_ALPHA_CUTOFF;
 
 /// One quad corner on the GPU (44 bytes): world position, macro-texture coordinates, the quad's
 /// rectangle in its macro-texture and where that macro-texture lies in its atlas page.

@@ -1,0 +1,307 @@
+//! The web viewer in a real browser: `lemi serve BUNDLE` exports a small bake and serves the
+//! viewer; Debian's Chromium, headless with SwiftShader's software WebGL (driven by
+//! `web/tools/browser.mjs` through playwright-core), loads it at fixed cameras inside a cell and
+//! takes a screenshot; `lemi render BUNDLE` renders the same cameras. The two must cover the same
+//! pixels (≥ 99 % agreement) and look alike (mean FLIP below [`FLIP_BOUND`]). Also: the viewer's
+//! port of the prediction rule lists the cells the runtime's does, in the same order.
+//!
+//! Skips, with the reason printed, where node, the node packages (`npm ci` in `web/`) or the
+//! browser are missing or the browser cannot start.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+
+use common::{lemi, stderr, tmp};
+use lemi_gpu::Frame;
+
+/// The mean FLIP the browser's picture may differ by from lemi's own (at the view's pixels per
+/// degree). The viewer draws what the runtime draws (the same texels unfiltered, the same alpha
+/// test and 1/16-texel quad growth, the same shading formula for the near geometry), so only what
+/// two rasterizers may do differently remains: the 8-bit rounding of the shaded near geometry
+/// (lemi encodes sRGB in the render target, the page in its shader: about a third of the near
+/// geometry's pixels differ by one step), pixel centres on triangle edges (SwiftShader and
+/// lavapipe share no tie rule) and f32 rounding of interpolated texel coordinates (a texel
+/// boundary crossing a pixel centre). Measured over the three views: 0.013–0.019, 70–90 % of it
+/// from the one-step differences on the ground. Lemi against itself gives 0; lemi against itself
+/// with the camera turned by 0.11° (one pixel) gives 0.057, as would a wrong texel, layer or
+/// colour space, which move whole regions. The bound lies between the two.
+const FLIP_BOUND: f32 = 0.03;
+
+/// Two cells of the builtin city (the export tests' small bundle).
+const SMALL: [&str; 11] = [
+    "builtin:city:20k:3",
+    "--region",
+    "15,1.7,-5,35,1.7,5",
+    "--cell-size",
+    "10",
+    "--resolution",
+    "128",
+    "--layers",
+    "4",
+    "--alpha-deg",
+    "0.5",
+];
+
+/// `web/` with its node packages, node itself and the browser; `None` after a visible skip.
+fn browser_tools() -> Option<PathBuf> {
+    let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../web");
+    if Command::new("node").arg("--version").output().is_err() {
+        lemi_testkit::skip("node is not installed (.ci/run installs it)");
+        return None;
+    }
+    for package in ["playwright-core", "three"] {
+        if !web.join("node_modules").join(package).is_dir() {
+            lemi_testkit::skip(&format!(
+                "{}/node_modules/{package} missing (run `npm ci` in web/, as .ci/run does)",
+                web.display()
+            ));
+            return None;
+        }
+    }
+    let chromium = std::env::var("LEMI_CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    if !Path::new(&chromium).is_file() {
+        lemi_testkit::skip(&format!(
+            "{chromium} not found (apt-get install chromium, as .ci/run does)"
+        ));
+        return None;
+    }
+    Some(web)
+}
+
+/// `lemi serve` running; killed when dropped.
+struct Server(Child);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `lemi serve ARGS --port 0` and returns it with the URL it prints.
+fn serve(args: &[&str]) -> (Server, String) {
+    let mut all: Vec<String> = vec!["serve".into()];
+    all.extend(args.iter().map(|s| s.to_string()));
+    all.extend(["--port".into(), "0".into()]);
+    let mut child = common::spawn_lemi(&all);
+    let stdout = child.stdout.take().unwrap();
+    let mut line = String::new();
+    BufReader::new(stdout).read_line(&mut line).unwrap();
+    let server = Server(child);
+    assert!(line.starts_with("http://"), "lemi serve printed `{line}`");
+    (server, line.trim().to_string())
+}
+
+/// Runs the browser driver; `None` (after a visible skip) when the browser cannot start.
+fn browser(web: &Path, url: &str, extra: &[&str]) -> Option<serde_json::Value> {
+    let o = Command::new("node")
+        .arg(web.join("tools/browser.mjs"))
+        .arg(url)
+        .args(extra)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    let v: serde_json::Value = serde_json::from_str(text.trim())
+        .unwrap_or_else(|e| panic!("browser.mjs printed `{text}` ({e}); stderr: {}", stderr(&o)));
+    if o.status.code() == Some(3) {
+        lemi_testkit::skip(&format!("{}", v["error"]));
+        return None;
+    }
+    assert!(o.status.success(), "the viewer failed: {v}");
+    Some(v)
+}
+
+/// A PNG as a frame: covered where alpha is not 0.
+fn frame(path: &Path) -> Frame {
+    let img = image::open(path).unwrap().to_rgba8();
+    let (width, height) = img.dimensions();
+    let rgba = img.into_raw();
+    let depth = rgba
+        .chunks_exact(4)
+        .map(|p| if p[3] > 0 { 1.0 } else { f32::INFINITY })
+        .collect();
+    // background black in both (the screenshot's transparent pixels may hold any colour)
+    let rgba = rgba
+        .chunks_exact(4)
+        .flat_map(|p| {
+            if p[3] > 0 {
+                [p[0], p[1], p[2], 255]
+            } else {
+                [0; 4]
+            }
+        })
+        .collect();
+    Frame {
+        width,
+        height,
+        rgba,
+        depth,
+    }
+}
+
+#[test]
+fn the_browser_shows_what_lemi_renders() {
+    let Some(web) = browser_tools() else { return };
+    let d = tmp("web", "viewer");
+    let bundle = d.join("b");
+    let mut args = vec!["bake"];
+    args.extend(SMALL);
+    args.extend(["-o", bundle.to_str().unwrap()]);
+    let o = lemi(&args);
+    assert!(o.status.success(), "bake: {}", stderr(&o));
+    // one command from the bake to the served viewer
+    let site = d.join("site");
+    let (_server, url) = serve(&[bundle.to_str().unwrap(), "-o", site.to_str().unwrap()]);
+    assert!(site.join("cells.json").is_file() && site.join("index.html").is_file());
+    assert!(site.join("vendor/three/build/three.module.js").is_file());
+    let (w, h) = (960u32, 540u32);
+    let fov_y = 60.0f64;
+    let views = [
+        ("along-x", "18,1.7,-2", "1,0,0"),
+        ("oblique", "22,2.5,3", "0.6,-0.1,-0.8"),
+        ("back", "27,1.7,1", "-1,0.05,0.2"),
+    ];
+    for (name, eye, dir) in views {
+        let shot = d.join(format!("{name}-browser.png"));
+        let page =
+            format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
+        let Some(v) = browser(
+            &web,
+            &page,
+            &[
+                "--screenshot",
+                shot.to_str().unwrap(),
+                "--size",
+                &format!("{w}x{h}"),
+            ],
+        ) else {
+            return;
+        };
+        let reference = d.join(format!("{name}-lemi.png"));
+        let o = lemi(&[
+            "render",
+            bundle.to_str().unwrap(),
+            "--eye",
+            eye,
+            "--dir",
+            dir,
+            "--fov",
+            &fov_y.to_string(),
+            "--size",
+            &format!("{w}x{h}"),
+            "-o",
+            reference.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "render: {}", stderr(&o));
+        let (r, t) = (frame(&reference), frame(&shot));
+        let c = lemi_eval::image_metrics::coverage(&r, &t).unwrap();
+        let n = (w * h) as f64;
+        let differing = (c.reference_covered - c.both) + (c.test_covered - c.both);
+        let agreement = 1.0 - differing as f64 / n;
+        let hfov = 2.0 * ((0.5 * fov_y.to_radians()).tan() * w as f64 / h as f64).atan();
+        let ppd = lemi_eval::image_metrics::ppd_for_view(w, hfov.to_degrees() as f32);
+        let flip = lemi_eval::image_metrics::flip(&r, &t, ppd).unwrap();
+        eprintln!(
+            "{name}: coverage agreement {:.4}% ({differing} of {n} pixels differ; lemi {} covered, browser {}), mean FLIP {:.5} at {ppd:.1} px/deg ({})",
+            100.0 * agreement,
+            c.reference_covered,
+            c.test_covered,
+            flip.mean,
+            v["renderer"]
+        );
+        assert!(agreement >= 0.99, "{name}: coverage agreement {agreement}");
+        assert!(
+            flip.mean < FLIP_BOUND,
+            "{name}: mean FLIP {} ≥ {FLIP_BOUND}",
+            flip.mean
+        );
+    }
+}
+
+#[test]
+fn the_viewer_predicts_as_the_runtime() {
+    let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../web");
+    if Command::new("node").arg("--version").output().is_err() {
+        lemi_testkit::skip("node is not installed (.ci/run installs it)");
+        return;
+    }
+    use glam::DVec3;
+    use lemi_core::cell::CellGrid;
+    use lemi_core::Aabb;
+    // 7 × 2 × 5 cells of 10 m × 4 m, off the origin
+    let grid = CellGrid::tile_with_height(
+        Aabb::new(DVec3::new(-30.0, 0.5, -20.0), DVec3::new(38.0, 7.5, 27.0)),
+        10.0,
+        Some(4.0),
+    )
+    .unwrap();
+    let options = lemi_runtime::PredictOptions::default();
+    let rule = lemi_export::PredictionRule {
+        horizon_seconds: options.horizon_seconds,
+        max_speed: options.max_speed,
+        max_acceleration: options.max_acceleration,
+        max_cells: options.max_cells,
+        ..Default::default()
+    };
+    // positions inside, on borders and outside; standing, walking, running, flying up
+    let mut cases = Vec::new();
+    let mut seed = 7u64;
+    let mut rand = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for k in 0..60 {
+        let p = DVec3::new(
+            -40.0 + 90.0 * rand(),
+            -2.0 + 12.0 * rand(),
+            -30.0 + 70.0 * rand(),
+        );
+        let p = if k % 7 == 0 { p.round() } else { p }; // on cell borders too
+        let speed = [0.0, 1.5, 5.0, 14.0][k % 4];
+        let v = DVec3::new(rand() - 0.5, 0.2 * (rand() - 0.5), rand() - 0.5).normalize() * speed;
+        cases.push((p, v));
+    }
+    let input = serde_json::json!({
+        "grid": {
+            "origin": grid.origin.to_array(),
+            "step": grid.step().to_array(),
+            "counts": grid.counts.to_array(),
+        },
+        "rule": rule,
+        "cases": cases.iter().map(|(p, v)| serde_json::json!({
+            "position": p.to_array(), "velocity": v.to_array()
+        })).collect::<Vec<_>>(),
+    });
+    let mut child = Command::new("node")
+        .arg(web.join("tools/predict_cases.mjs"))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.to_string().as_bytes())
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let js: Vec<Vec<String>> = serde_json::from_slice(&o.stdout).unwrap();
+    let mut listed = 0;
+    for ((p, v), js) in cases.iter().zip(&js) {
+        let rust: Vec<String> = lemi_runtime::predict(*p, *v, &grid, &options)
+            .iter()
+            .map(|c| c.cell.id().to_string())
+            .collect();
+        assert_eq!(&rust, js, "at {p} moving {v}");
+        listed += rust.len();
+    }
+    assert!(listed > 100, "the cases list cells ({listed})");
+}

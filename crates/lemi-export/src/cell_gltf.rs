@@ -1,0 +1,521 @@
+//! One view cell as a binary glTF 2.0 file: the impostor quads, grouped per macro-texture, and
+//! optionally the cell's near geometry with its materials.
+//!
+//! This work is based on the runtime of GI 2002 (Jeschke, Wimmer et al., *Layered
+//! Environment-Map Impostors for Arbitrary Scenes*, sec. 3): the far field of a view cell is a set
+//! of textured quads, alpha-tested and depth-tested against each other and the near geometry, so
+//! any renderer with an alpha test draws it without sorting. In glTF 2.0 terms:
+//!
+//! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture and
+//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices (its corners in the order of
+//!   [`Quad::corners`], world coordinates, f32 as the bundle computes them) and two triangles
+//!   `0 1 2, 0 2 3`. Within a primitive the quads are in the runtime's draw order: by cube face,
+//!   then the nearest layer first (a quad's `layer` counts far to near), ties in the cell's order,
+//!   so depth rejection skips what nearer layers hide. `TEXCOORD_0` is
+//!   [`Quad::macro_texel_corners`] divided by the macro-texture's size (exact in f32: texel edges
+//!   of textures up to 2¹⁶ texels); a reader gets the quad's texel rectangle back by multiplying.
+//! - **Materials**: `KHR_materials_unlit` (the layers are pre-shaded, final sRGB colours),
+//!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test), or
+//!   `OPAQUE` for the quads whose texels all pass it ([`opaque_quads`]: as the runtime's opaque
+//!   pipeline, so a renderer can test depth before shading; a separate primitive per kind),
+//!   double-sided, base colour factor 1, metallic 0, roughness 1 (what an unlit-unaware reader
+//!   falls back to), the macro-texture as base colour texture through a nearest-texel,
+//!   clamp-to-edge sampler (the runtime fetches texels, it never filters).
+//! - **Textures**: the bundle's PNG files as they are (no re-encoding, so the texels and the bytes
+//!   are the bake's), or for a block-compressed bundle the texels decoded and stored as PNG; or
+//!   (`ExportTextures::Ktx2`) the bundle's KTX2 files through `KHR_texture_basisu`, see
+//!   `docs/EXPORT.md` for what that means for BC7/BC1.
+//! - **Near geometry** (optional, it needs the scene): node `near`, one primitive per source mesh
+//!   of the near list ([`Scene::extract`], as the runtime draws it) with `POSITION`, `NORMAL`,
+//!   `TEXCOORD_0` (when its material has a texture), `COLOR_0` (when a vertex colour is not white)
+//!   and the material: base colour factor and texture, metallic 0, roughness 1, double-sided.
+//! - **`extras`** of the scene: the cell (id, grid index, box, reference viewpoint), α, the
+//!   faces and their layers (distances and borders), resolution, near field, quad and triangle
+//!   counts, the bundle's parameters hash and scene fingerprint.
+
+use gltf::json;
+use json::validation::Checked::Valid;
+use lemi_core::bundle::{CellFile, Quad, QUAD_ALPHA_CUTOFF};
+use lemi_core::classify::TriRef;
+use lemi_core::compress::TextureFormat;
+use lemi_core::Scene;
+use serde_json::json;
+
+use crate::document::{extras, Document};
+use crate::{ExportError, ExportTextures};
+
+/// The name of the extension for unlit materials.
+pub const UNLIT: &str = "KHR_materials_unlit";
+/// The name of the extension for KTX2 textures.
+pub const BASISU: &str = "KHR_texture_basisu";
+
+/// One exported cell and the numbers that describe it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellGlb {
+    /// The `.glb` file.
+    pub bytes: Vec<u8>,
+    pub quads: usize,
+    pub macro_textures: usize,
+    /// Bytes of the embedded macro-texture images.
+    pub texture_bytes: u64,
+    /// Near triangles written (0 without the scene).
+    pub near_triangles: u64,
+    /// Bytes of the near geometry (vertices, indices and material images).
+    pub near_bytes: u64,
+}
+
+/// Whether each quad's texels (its rectangle of its macro-texture) all pass the alpha test, so
+/// it can be drawn without it (`alphaMode: OPAQUE`): as the runtime's opaque pipeline, this lets
+/// a renderer test depth before shading.
+pub fn opaque_quads(file: &CellFile) -> Result<Vec<bool>, ExportError> {
+    let macros = file
+        .decode_macros()
+        .map_err(|e| ExportError::Gltf(format!("decoding the macro-textures: {e}")))?;
+    // the smallest alpha byte the test keeps: a / 255 ≥ cutoff
+    let keep = (0..=255u8)
+        .find(|&a| a as f32 / 255.0 >= QUAD_ALPHA_CUTOFF)
+        .unwrap_or(255);
+    Ok(file
+        .header
+        .quads
+        .iter()
+        .map(|q| {
+            let Some(m) = macros.get(q.macro_index as usize) else {
+                return false;
+            };
+            let [x, y, w, h] = q.rect.map(|v| v as usize);
+            let stride = 4 * m.width as usize;
+            (y..y + h).all(|row| {
+                let start = row * stride + 4 * x;
+                m.rgba
+                    .get(start..start + 4 * w)
+                    .is_some_and(|px| px.chunks_exact(4).all(|t| t[3] >= keep))
+            })
+        })
+        .collect())
+}
+
+/// The order the quads are written in: one primitive per macro-texture and kind (opaque quads
+/// before alpha-tested ones), within it by face, then the nearest layer first (a quad's `layer`
+/// counts far to near), ties in the cell's order: the runtime's order within a draw call
+/// (`lemi_gpu::impostor`), so depth rejection skips what nearer layers hide.
+pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..quads.len()).collect();
+    order.sort_by_key(|&k| {
+        (
+            quads[k].macro_index,
+            !opaque.get(k).copied().unwrap_or(false),
+            quads[k].face,
+            std::cmp::Reverse(quads[k].layer),
+        )
+    });
+    order
+}
+
+/// How a cell is exported.
+#[derive(Clone, Copy, Debug)]
+pub struct CellOptions<'a> {
+    pub textures: ExportTextures,
+    /// The bundle's α (radians), recorded in the cell's `extras`.
+    pub alpha: f64,
+    /// `asset.generator`, e.g. `lemi 0.1.0`.
+    pub generator: &'a str,
+}
+
+/// Exports one verified cell file. `scene` (the scene the bundle was baked from, checked by the
+/// caller) adds the near geometry.
+pub fn export_cell(
+    file: &CellFile,
+    scene: Option<&Scene>,
+    options: &CellOptions,
+) -> Result<CellGlb, ExportError> {
+    let CellOptions {
+        textures,
+        alpha,
+        generator,
+    } = *options;
+    let header = &file.header;
+    if header.hlod.is_some() {
+        return Err(ExportError::Unsupported(
+            "an HLOD bundle has no impostor layers to export (bake with --strategy lemi)".into(),
+        ));
+    }
+    let mut doc = Document::new(generator);
+    doc.use_extension(UNLIT, false);
+    let sampler = doc.root.push(json::texture::Sampler {
+        mag_filter: Some(Valid(json::texture::MagFilter::Nearest)),
+        min_filter: Some(Valid(json::texture::MinFilter::Nearest)),
+        name: Some("texels".into()),
+        wrap_s: Valid(json::texture::WrappingMode::ClampToEdge),
+        wrap_t: Valid(json::texture::WrappingMode::ClampToEdge),
+        extensions: None,
+        extras: Default::default(),
+    });
+
+    // macro-textures: images, textures, materials
+    let images = macro_images(file, textures)?;
+    let mut texture_bytes = 0u64;
+    let mut materials = Vec::with_capacity(images.len());
+    for (i, (bytes, mime)) in images.iter().enumerate() {
+        texture_bytes += bytes.len() as u64;
+        let image = doc.image(bytes, mime, format!("macro{i}"));
+        let texture = match textures {
+            ExportTextures::Png => json::Texture {
+                name: Some(format!("macro{i}")),
+                sampler: Some(sampler),
+                source: image,
+                extensions: None,
+                extras: Default::default(),
+            },
+            ExportTextures::Ktx2 => {
+                doc.use_extension(BASISU, true);
+                let mut ext = json::extensions::texture::Texture::default();
+                ext.others
+                    .insert(BASISU.into(), json!({ "source": image.value() }));
+                json::Texture {
+                    name: Some(format!("macro{i}")),
+                    sampler: Some(sampler),
+                    // no core source: the KTX2 image is reachable only through the required
+                    // extension (gltf-json leaves out a source of u32::MAX)
+                    source: json::Index::new(u32::MAX),
+                    extensions: Some(ext),
+                    extras: Default::default(),
+                }
+            }
+        };
+        let texture = doc.root.push(texture);
+        materials.push([
+            doc.root.push(quad_material(texture, i, true)),
+            doc.root.push(quad_material(texture, i, false)),
+        ]);
+    }
+
+    // quads: one primitive per macro-texture, in the runtime's order
+    let quads = &header.quads;
+    let opaque = opaque_quads(file)?;
+    let order = quad_order(quads, &opaque);
+    let mut primitives = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let m = quads[order[start]].macro_index;
+        let kind = opaque[order[start]];
+        let end = start
+            + order[start..]
+                .iter()
+                .take_while(|&&k| quads[k].macro_index == m && opaque[k] == kind)
+                .count();
+        let info = header.macros.get(m as usize).ok_or_else(|| {
+            ExportError::Gltf(format!("a quad uses macro-texture {m}, the cell has fewer"))
+        })?;
+        let (w, h) = (info.width as f32, info.height as f32);
+        let n = end - start;
+        let mut positions = Vec::with_capacity(4 * n);
+        let mut uvs = Vec::with_capacity(4 * n);
+        let mut indices = Vec::with_capacity(6 * n);
+        for &k in &order[start..end] {
+            let q = &quads[k];
+            let base = positions.len() as u32;
+            positions.extend(q.corners);
+            uvs.extend(
+                q.macro_texel_corners()
+                    .map(|[x, y]| [x as f32 / w, y as f32 / h]),
+            );
+            indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
+        }
+        let position = doc.positions(&positions);
+        let uv = doc.texcoords(&uvs);
+        let index = doc.indices(&indices, positions.len());
+        let material = materials
+            .get(m as usize)
+            .map(|pair| pair[usize::from(!kind)]);
+        primitives.push(primitive(
+            [
+                (json::mesh::Semantic::Positions, position),
+                (json::mesh::Semantic::TexCoords(0), uv),
+            ],
+            index,
+            material,
+        ));
+        start = end;
+    }
+    let mut nodes = Vec::new();
+    if !primitives.is_empty() {
+        let mesh = doc.root.push(json::Mesh {
+            extensions: None,
+            extras: Default::default(),
+            name: Some("impostors".into()),
+            primitives,
+            weights: None,
+        });
+        nodes.push(doc.root.push(node("impostors", mesh)));
+    }
+
+    // near geometry
+    let bin_before_near = doc.bin.len();
+    let mut near_triangles = 0;
+    if let Some(scene) = scene {
+        let refs: Vec<TriRef> = file.near.iter().map(|&p| TriRef::from(p)).collect();
+        let meshes = scene.extract(&refs).map_err(|e| {
+            ExportError::Near(format!(
+                "the near list does not fit the scene ({e}); export with the scene the bundle was baked from"
+            ))
+        })?;
+        let mut near_materials = std::collections::HashMap::new();
+        let mut near_primitives = Vec::new();
+        for mesh in &meshes {
+            if mesh.indices.is_empty() {
+                continue;
+            }
+            near_triangles += mesh.triangle_count() as u64;
+            let material = match near_materials.get(&mesh.material) {
+                Some(&m) => m,
+                None => {
+                    let m = near_material(&mut doc, scene, mesh.material)?;
+                    near_materials.insert(mesh.material, m);
+                    m
+                }
+            };
+            let textured = scene
+                .materials
+                .get(mesh.material as usize)
+                .is_some_and(|m| m.texture.is_some());
+            let p: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.position).collect();
+            let n: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.normal).collect();
+            let mut attributes = vec![
+                (json::mesh::Semantic::Positions, doc.positions(&p)),
+                (json::mesh::Semantic::Normals, doc.normals(&n)),
+            ];
+            if textured {
+                let uv: Vec<[f32; 2]> = mesh.vertices.iter().map(|v| v.uv).collect();
+                attributes.push((json::mesh::Semantic::TexCoords(0), doc.texcoords(&uv)));
+            }
+            if mesh.vertices.iter().any(|v| v.color != [255; 4]) {
+                let c: Vec<[u8; 4]> = mesh.vertices.iter().map(|v| v.color).collect();
+                attributes.push((json::mesh::Semantic::Colors(0), doc.colors(&c)));
+            }
+            let index = doc.indices(&mesh.indices, mesh.vertices.len());
+            near_primitives.push(primitive(attributes, index, Some(material)));
+        }
+        if !near_primitives.is_empty() {
+            let mesh = doc.root.push(json::Mesh {
+                extensions: None,
+                extras: Default::default(),
+                name: Some("near".into()),
+                primitives: near_primitives,
+                weights: None,
+            });
+            nodes.push(doc.root.push(node("near", mesh)));
+        }
+    }
+    let near_bytes = (doc.bin.len() - bin_before_near) as u64;
+
+    let cell = &header.cell;
+    let bounds = cell.bounds();
+    let info = json!({
+        "lemi": {
+            "cell": cell.id().to_string(),
+            "index": cell.index.to_array(),
+            "box": { "min": bounds.min.to_array(), "max": bounds.max.to_array() },
+            "reference_viewpoint": cell.center.to_array(),
+            "alpha": alpha,
+            "resolution": header.resolution,
+            "near_field": header.near_field,
+            "faces": header.faces.iter().map(|f| f.name()).collect::<Vec<_>>(),
+            "layer_count": header.layers.iter().map(|l| l.len()).collect::<Vec<_>>(),
+            "layers": header.layers.iter().map(|face| face.iter().map(|l| json!({
+                "distance": l.distance,
+                "near_border": l.near_border,
+                "far_border": if l.far_border >= f64::MAX { None } else { Some(l.far_border) },
+            })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "quads": quads.len(),
+            "macro_textures": header.macros.len(),
+            "near_triangles": near_triangles,
+            "alpha_cutoff": QUAD_ALPHA_CUTOFF,
+            "params_hash": header.params_hash,
+            "scene_fingerprint": header.scene_fingerprint,
+            "texture_format": header.texture_format.name(),
+        }
+    });
+    let scene_index = doc.root.push(json::Scene {
+        extensions: None,
+        extras: extras(&info)?,
+        name: Some(format!("cell {}", cell.id())),
+        nodes,
+    });
+    doc.root.scene = Some(scene_index);
+    let quads_n = quads.len();
+    let macro_textures = header.macros.len();
+    let bytes = doc.into_glb()?;
+    Ok(CellGlb {
+        bytes,
+        quads: quads_n,
+        macro_textures,
+        texture_bytes,
+        near_triangles,
+        near_bytes,
+    })
+}
+
+/// The macro-textures as image bytes and MIME type, in `header.macros` order.
+fn macro_images(
+    file: &CellFile,
+    textures: ExportTextures,
+) -> Result<Vec<(Vec<u8>, &'static str)>, ExportError> {
+    let format = file.header.texture_format;
+    match (textures, format) {
+        (ExportTextures::Png, TextureFormat::Png) => Ok(file
+            .macro_blobs
+            .iter()
+            .map(|b| (b.clone(), "image/png"))
+            .collect()),
+        (ExportTextures::Png, _) => {
+            let decoded = file
+                .decode_macros()
+                .map_err(|e| ExportError::Gltf(format!("decoding the macro-textures: {e}")))?;
+            decoded
+                .into_iter()
+                .map(|m| Ok((encode_png(m.width, m.height, &m.rgba)?, "image/png")))
+                .collect()
+        }
+        (ExportTextures::Ktx2, f) if f.block().is_some() => Ok(file
+            .macro_blobs
+            .iter()
+            .map(|b| (b.clone(), "image/ktx2"))
+            .collect()),
+        (ExportTextures::Ktx2, _) => Err(ExportError::Unsupported(
+            "--textures ktx2 needs a bundle baked with --texture-format bc7 or bc1 (this one stores PNG)".into(),
+        )),
+    }
+}
+
+/// RGBA8 as PNG (the image crate's encoder).
+pub(crate) fn encode_png(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, ExportError> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Best,
+        image::codecs::png::FilterType::Adaptive,
+    )
+    .write_image(rgba, width, height, image::ExtendedColorType::Rgba8)
+    .map_err(|e| ExportError::Gltf(format!("encoding a {width}x{height} PNG: {e}")))?;
+    Ok(out)
+}
+
+/// The material of macro-texture `i`'s quads: alpha-tested (`MASK`), or `opaque` for quads whose
+/// texels all pass the test.
+fn quad_material(texture: json::Index<json::Texture>, i: usize, opaque: bool) -> json::Material {
+    json::Material {
+        alpha_cutoff: (!opaque).then_some(json::material::AlphaCutoff(QUAD_ALPHA_CUTOFF)),
+        alpha_mode: Valid(if opaque {
+            json::material::AlphaMode::Opaque
+        } else {
+            json::material::AlphaMode::Mask
+        }),
+        double_sided: true,
+        name: Some(if opaque {
+            format!("macro{i}-opaque")
+        } else {
+            format!("macro{i}")
+        }),
+        pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+            base_color_factor: json::material::PbrBaseColorFactor([1.0; 4]),
+            base_color_texture: Some(json::texture::Info {
+                index: texture,
+                tex_coord: 0,
+                extensions: None,
+                extras: Default::default(),
+            }),
+            metallic_factor: json::material::StrengthFactor(0.0),
+            roughness_factor: json::material::StrengthFactor(1.0),
+            metallic_roughness_texture: None,
+            extensions: None,
+            extras: Default::default(),
+        },
+        extensions: Some(json::extensions::material::Material {
+            unlit: Some(json::extensions::material::Unlit {}),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// The material of a near mesh: base colour factor and texture (PNG), metallic 0, roughness 1.
+fn near_material(
+    doc: &mut Document,
+    scene: &Scene,
+    index: u32,
+) -> Result<json::Index<json::Material>, ExportError> {
+    let default = lemi_core::Material::default();
+    let m = scene.materials.get(index as usize).unwrap_or(&default);
+    let texture = match m.texture.and_then(|t| scene.textures.get(t as usize)) {
+        Some(t) => {
+            let png = encode_png(t.width, t.height, &t.rgba8)?;
+            let image = doc.image(&png, "image/png", t.name.clone());
+            // scene textures repeat and are filtered (the reference renderer's sampler)
+            let repeat = doc.root.push(json::texture::Sampler {
+                mag_filter: Some(Valid(json::texture::MagFilter::Linear)),
+                min_filter: Some(Valid(json::texture::MinFilter::LinearMipmapLinear)),
+                name: None,
+                wrap_s: Valid(json::texture::WrappingMode::Repeat),
+                wrap_t: Valid(json::texture::WrappingMode::Repeat),
+                extensions: None,
+                extras: Default::default(),
+            });
+            Some(doc.root.push(json::Texture {
+                name: Some(t.name.clone()),
+                sampler: Some(repeat),
+                source: image,
+                extensions: None,
+                extras: Default::default(),
+            }))
+        }
+        None => None,
+    };
+    Ok(doc.root.push(json::Material {
+        alpha_mode: Valid(json::material::AlphaMode::Opaque),
+        double_sided: true,
+        name: Some(m.name.clone()),
+        pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+            base_color_factor: json::material::PbrBaseColorFactor(
+                m.base_color.map(|c| c.clamp(0.0, 1.0)),
+            ),
+            base_color_texture: texture.map(|index| json::texture::Info {
+                index,
+                tex_coord: 0,
+                extensions: None,
+                extras: Default::default(),
+            }),
+            metallic_factor: json::material::StrengthFactor(0.0),
+            roughness_factor: json::material::StrengthFactor(1.0),
+            metallic_roughness_texture: None,
+            extensions: None,
+            extras: Default::default(),
+        },
+        ..Default::default()
+    }))
+}
+
+fn primitive(
+    attributes: impl IntoIterator<Item = (json::mesh::Semantic, json::Index<json::Accessor>)>,
+    indices: json::Index<json::Accessor>,
+    material: Option<json::Index<json::Material>>,
+) -> json::mesh::Primitive {
+    json::mesh::Primitive {
+        attributes: attributes.into_iter().map(|(s, a)| (Valid(s), a)).collect(),
+        extensions: None,
+        extras: Default::default(),
+        indices: Some(indices),
+        material,
+        mode: Valid(json::mesh::Mode::Triangles),
+        targets: None,
+    }
+}
+
+fn node(name: &str, mesh: json::Index<json::Mesh>) -> json::Node {
+    json::Node {
+        mesh: Some(mesh),
+        name: Some(name.into()),
+        ..Default::default()
+    }
+}
