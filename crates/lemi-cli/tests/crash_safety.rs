@@ -92,10 +92,20 @@ fn clean_bake(flags: &[&str], name: &str) -> Clean {
     }
 }
 
-/// The six-cell clean bake, shared by the tests of this file.
+static SIX: OnceLock<Clean> = OnceLock::new();
+
+/// The six-cell clean bake, shared by the tests of this file (removed when the process exits).
 fn six() -> &'static Clean {
-    static CLEAN: OnceLock<Clean> = OnceLock::new();
-    CLEAN.get_or_init(|| clean_bake(SIX_CELLS, "clean6"))
+    SIX.get_or_init(|| {
+        extern "C" fn remove() {
+            if let Some(parent) = SIX.get().and_then(|c| c.bundle.parent()) {
+                let _ = std::fs::remove_dir_all(parent);
+            }
+        }
+        // SAFETY: registers a function without arguments to run at `exit`.
+        unsafe { libc::atexit(remove) };
+        clean_bake(SIX_CELLS, "clean6")
+    })
 }
 
 fn run(args: &[String]) -> Output {
@@ -339,6 +349,7 @@ fn twenty_kills_during_a_twelve_cell_bake() {
     );
     assert_eq!(landed, n);
     let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(clean.bundle.parent().unwrap());
 }
 
 /// A copy of the clean bundle's first `n` cells (in bake order) in a fresh bundle directory: what
