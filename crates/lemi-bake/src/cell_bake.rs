@@ -148,26 +148,7 @@ impl<'a> Baker<'a> {
             );
         }
 
-        let options = CompressOptions {
-            gap_fill: Recording::of(params.layering).gap_fill,
-            micro: MicroTextureOptions {
-                cell_size: params.micro_grid,
-                threshold: params.micro_threshold,
-                ..Default::default()
-            },
-            packing: PackingOptions {
-                // a block format: no 4×4 block mixes two micro-textures
-                block: if params.texture_format.block().is_some() {
-                    4
-                } else {
-                    1
-                },
-                // no texture doubled for the few footprints that overflow a power of two
-                trim: true,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
+        let options = compress_options(params);
         // face by face: record a face's layers while the previous face is compressed to
         // micro-textures on another thread, then drop its images (at most two faces' layers in
         // memory, not the cell's; the GPU recording and the CPU stages overlap)
@@ -417,6 +398,31 @@ impl<'a> Baker<'a> {
 }
 
 /// The placement's layers of every face as stored.
+/// The compression options a bake with `params` uses (gap filling by the layering, the
+/// micro-grid, block-aligned and trimmed packing for block formats).
+pub fn compress_options(params: &BakeParams) -> CompressOptions {
+    CompressOptions {
+        gap_fill: Recording::of(params.layering).gap_fill,
+        micro: MicroTextureOptions {
+            cell_size: params.micro_grid,
+            threshold: params.micro_threshold,
+            ..Default::default()
+        },
+        packing: PackingOptions {
+            // a block format: no 4×4 block mixes two micro-textures
+            block: if params.texture_format.block().is_some() {
+                4
+            } else {
+                1
+            },
+            // no texture doubled for the few footprints that overflow a power of two
+            trim: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
 /// Makes every allocation of 1 MiB or more a fresh mapping of the C library's allocator (glibc
 /// on Linux; elsewhere nothing to do). A layer image is `Res²` texels of which the recorder
 /// writes only the tiles its slab's triangles touch (7 % of them on a `builtin:city:1M` cell at

@@ -6,6 +6,6 @@ pub mod cell_bake;
 pub mod orchestrate;
 pub mod report;
 
-pub use cell_bake::{Baker, Stage};
+pub use cell_bake::{compress_options, Baker, Stage};
 pub use orchestrate::{merge, run, BakeError, BakeJob, CellOutcome, RunSummary, ShardRecord};
 pub use report::{BakeReport, CellReport};

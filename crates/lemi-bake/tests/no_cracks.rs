@@ -627,14 +627,15 @@ fn bake_copy_stages(
             layers: images,
         });
     }
+    // the bake's options, but for what the variant changes
+    let baked = lemi_bake::compress_options(params);
     let options = CompressOptions {
         micro: MicroTextureOptions {
-            cell_size: params.micro_grid,
-            threshold: params.micro_threshold,
             merge: copy.merge,
+            ..baked.micro
         },
         gap_sources: copy.gap_sources,
-        ..Default::default()
+        ..baked
     };
     let raw = faces.clone();
     let compressed = compress_cell(&mut faces, &options).expect("compress");
