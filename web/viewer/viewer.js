@@ -164,7 +164,7 @@ void main() {
 }`;
 
 const quadUniforms = { tint: { value: params.get('tint') === '1' } };
-const nearUniforms = { grey: { value: false } };
+const nearUniforms = { grey: { value: quadUniforms.tint.value } };
 
 /// Rebuilds one impostor primitive as lemi's runtime draws it: grown quads, texel coordinates,
 /// the quad's texel rectangle and its layer per vertex.

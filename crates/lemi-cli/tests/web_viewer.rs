@@ -218,6 +218,37 @@ fn the_browser_shows_what_lemi_renders() {
             "{name}: mean FLIP {} ≥ {FLIP_BOUND}",
             flip.mean
         );
+        if name == "along-x" {
+            // the layer colouring (key L, `tint=1`): the same pixels covered, the impostors
+            // tinted by layer, the near geometry grey
+            let tinted = d.join("along-x-tinted.png");
+            browser(
+                &web,
+                &format!("{page}&tint=1"),
+                &[
+                    "--screenshot",
+                    tinted.to_str().unwrap(),
+                    "--size",
+                    &format!("{w}x{h}"),
+                ],
+            )
+            .expect("the browser started a moment ago");
+            let tt = frame(&tinted);
+            let c = lemi_eval::image_metrics::coverage(&t, &tt).unwrap();
+            assert_eq!(c.reference_covered, c.both, "tinting changes no coverage");
+            assert_eq!(c.test_covered, c.both, "tinting changes no coverage");
+            let changed = t
+                .rgba
+                .chunks_exact(4)
+                .zip(tt.rgba.chunks_exact(4))
+                .filter(|(a, b)| a[3] > 0 && a != b)
+                .count();
+            assert!(
+                changed as f64 > 0.5 * c.both as f64,
+                "{changed} of {} covered pixels tinted",
+                c.both
+            );
+        }
     }
 }
 
