@@ -7,27 +7,12 @@ mod common;
 
 use std::path::Path;
 
-use common::{assert_same_bundle, lemi, spawn_lemi, stderr, tmp};
+use common::{assert_same_bundle, lemi, spawn_lemi, stderr, tmp, SIX_CELLS};
 use lemi_core::bundle::Bundle;
-
-/// Six cells of a small built-in city, small layers: a few seconds per process.
-const SCENE_AND_FLAGS: &[&str] = &[
-    "builtin:city:20000",
-    "--region",
-    "0,1.7,-10,30,1.7,10",
-    "--cell-size",
-    "10",
-    "--resolution",
-    "32",
-    "--layers",
-    "4",
-    "--alpha-deg",
-    "0.5",
-];
 
 fn bake_args(bundle: &Path, extra: &[&str]) -> Vec<String> {
     let mut a: Vec<String> = vec!["bake".into()];
-    a.extend(SCENE_AND_FLAGS.iter().map(|s| s.to_string()));
+    a.extend(SIX_CELLS.iter().map(|s| s.to_string()));
     a.extend(["-o".into(), bundle.display().to_string()]);
     a.extend(extra.iter().map(|s| s.to_string()));
     a

@@ -21,28 +21,13 @@ use std::time::{Duration, Instant};
 
 use common::{
     assert_clean_error_all, assert_same_bundle, bundle_files, lemi, lemi_command, spawn_lemi,
-    stderr, tmp,
+    stderr, tmp, SIX_CELLS,
 };
 use lemi_core::bundle::{check_cell_bytes, Bundle, CellCheck};
 use lemi_core::cell::CellId;
 use lemi_core::container::is_temp_file_name;
 
-/// Six cells of a small built-in city, small layers: a few seconds per bake.
-const SIX_CELLS: &[&str] = &[
-    "builtin:city:20000",
-    "--region",
-    "0,1.7,-10,30,1.7,10",
-    "--cell-size",
-    "10",
-    "--resolution",
-    "32",
-    "--layers",
-    "4",
-    "--alpha-deg",
-    "0.5",
-];
-
-/// Twelve cells (4 × 3) of the same city.
+/// Twelve cells (4 × 3) of the city of [`SIX_CELLS`].
 const TWELVE_CELLS: &[&str] = &[
     "builtin:city:20000",
     "--region",

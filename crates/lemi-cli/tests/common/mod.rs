@@ -108,3 +108,20 @@ pub fn spawn_lemi(args: &[String]) -> std::process::Child {
         .spawn()
         .expect("the lemi binary starts")
 }
+
+/// Six 10 m cells of a small built-in city with small layers: a few seconds per bake (the
+/// suites that kill, race or shard bakes).
+#[allow(dead_code)] // not every suite bakes these cells
+pub const SIX_CELLS: &[&str] = &[
+    "builtin:city:20000",
+    "--region",
+    "0,1.7,-10,30,1.7,10",
+    "--cell-size",
+    "10",
+    "--resolution",
+    "32",
+    "--layers",
+    "4",
+    "--alpha-deg",
+    "0.5",
+];
