@@ -40,9 +40,10 @@ pub struct PackingOptions {
     /// Side of the texel blocks the macro-textures are encoded in: 1 (PNG, no alignment) or a
     /// power of two such as 4 (BC7, BC1): footprints are padded to, and placed on, multiples of it.
     pub block: u32,
-    /// Trim every macro-texture to the footprints it holds (its width to the rightmost footprint's
-    /// right edge, its height to the topmost's), instead of the paper's power-of-two sides: a
-    /// packing that overflows a power of two by a little no longer doubles the texture. Every
+    /// Sides that are not powers of two: a macro-texture's width is the remaining area over its
+    /// height (not rounded up to a power of two), and once filled it is trimmed to the
+    /// footprints it holds (its width to the rightmost footprint's right edge, its height to the
+    /// topmost's), instead of the paper's power-of-two sides, which can double a texture. Every
     /// GPU lemi runs on samples textures of any size; the sides stay multiples of `block`.
     pub trim: bool,
 }
@@ -293,11 +294,19 @@ pub fn pack_rects(
         let mi = macro_sizes.len() as u32;
         let height = h0.next_power_of_two();
         let area: u64 = remaining.iter().map(|r| r.1 as u64 * r.2 as u64).sum();
-        let width = area
-            .div_ceil(height as u64)
-            .next_power_of_two()
-            .max(w0.next_power_of_two() as u64)
-            .min(max as u64) as u32;
+        let width = if options.trim {
+            // no power of two: the remaining area over the height (at least the first's width,
+            // a multiple of the block side); what does not fit goes to the next macro-texture
+            area.div_ceil(height as u64)
+                .div_ceil(block as u64)
+                .saturating_mul(block as u64)
+                .max(w0 as u64)
+        } else {
+            area.div_ceil(height as u64)
+                .next_power_of_two()
+                .max(w0.next_power_of_two() as u64)
+        }
+        .min(max as u64) as u32;
         let mut space = FreeSpace::new(width, height);
         let mut placed = vec![false; remaining.len()];
         let mut put = |k: usize, x: u32, y: u32, space: &mut FreeSpace, placed: &mut [bool]| {
