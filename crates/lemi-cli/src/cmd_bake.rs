@@ -376,17 +376,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
     } else {
         let mut v = Vec::new();
         for id in &args.cells {
-            let c = grid.parse_id(id).with_context(|| {
-                format!(
-                    "--cells: the grid has {}x{}x{} cells (ids 0_0_0 to {}_{}_{})",
-                    grid.counts.x,
-                    grid.counts.y,
-                    grid.counts.z,
-                    grid.counts.x - 1,
-                    grid.counts.y - 1,
-                    grid.counts.z - 1
-                )
-            })?;
+            let c = crate::load::parse_cell_flag(&grid, id)?;
             if !v.contains(&c) {
                 v.push(c);
             }

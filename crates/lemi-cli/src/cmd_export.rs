@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use lemi_core::bundle::Bundle;
 use lemi_core::cell::CellId;
 use lemi_export::{ExportOptions, ExportSummary, ExportTextures, PredictionRule};
@@ -128,17 +128,7 @@ fn parse_cells(bundle: &Bundle, cells: &[String]) -> anyhow::Result<Option<Vec<C
     let grid = &bundle.manifest().grid;
     let mut ids = Vec::new();
     for id in cells {
-        let cell = grid.parse_id(id).with_context(|| {
-            format!(
-                "--cells: the grid has {}x{}x{} cells (ids 0_0_0 to {}_{}_{})",
-                grid.counts.x,
-                grid.counts.y,
-                grid.counts.z,
-                grid.counts.x - 1,
-                grid.counts.y - 1,
-                grid.counts.z - 1
-            )
-        })?;
+        let cell = crate::load::parse_cell_flag(grid, id)?;
         if bundle.entry(cell.id()).is_none() {
             bail!(
                 "--cells: cell {} was not baked into {}",

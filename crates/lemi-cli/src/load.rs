@@ -76,3 +76,21 @@ pub fn print_warnings(report: &lemi_scene::import::ImportReport) {
         eprintln!("warning: {w}");
     }
 }
+
+/// A `--cells` id (`x_y_z`) of `grid`, or an error naming the flag and the grid's ids.
+pub fn parse_cell_flag(
+    grid: &lemi_core::cell::CellGrid,
+    id: &str,
+) -> anyhow::Result<lemi_core::cell::ViewCell> {
+    grid.parse_id(id).with_context(|| {
+        format!(
+            "--cells: the grid has {}x{}x{} cells (ids 0_0_0 to {}_{}_{})",
+            grid.counts.x,
+            grid.counts.y,
+            grid.counts.z,
+            grid.counts.x - 1,
+            grid.counts.y - 1,
+            grid.counts.z - 1
+        )
+    })
+}
