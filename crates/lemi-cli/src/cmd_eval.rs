@@ -57,6 +57,11 @@ pub struct Args {
     /// coverage outlines) exceeds this many pixels.
     #[arg(long, value_name = "PX")]
     pub require_silhouette_p99: Option<f64>,
+    /// Fail (exit status 2) when some view's coverage displacement p99 (how far the impostor's
+    /// coverage lies from the reference's, a slit closed or a thin feature dropped counted by its
+    /// own pixels) exceeds this many pixels.
+    #[arg(long, value_name = "PX")]
+    pub require_displacement_p99: Option<f64>,
     /// Fail (exit status 2) when the impostor covers more than this share (0..1) of all evaluated
     /// pixels where the reference shows background.
     #[arg(long, value_name = "SHARE")]
@@ -78,6 +83,7 @@ pub fn run(args: Args) -> Result<()> {
         ("--require-max-px", args.require_max_px),
         ("--require-placement-max-px", args.require_placement_max_px),
         ("--require-silhouette-p99", args.require_silhouette_p99),
+        ("--require-displacement-p99", args.require_displacement_p99),
     ] {
         if let Some(x) = v {
             if !(x.is_finite() && x >= 0.0) {
@@ -208,10 +214,12 @@ pub fn run(args: Args) -> Result<()> {
             println!("split      {split}");
         }
         println!(
-            "silhouette max {:.2} px, worst view p99 {:.2} px, mean {:.3} px; false coverage {} pixels ({:.3} %)",
+            "silhouette max {:.2} px, worst view p99 {:.2} px, mean {:.3} px; coverage displacement max {:.2} px, worst view p99 {:.2} px; false coverage {} pixels ({:.3} %)",
             s.silhouette_max_px,
             s.silhouette_p99_px,
             s.silhouette_mean_px,
+            s.displacement_max_px,
+            s.displacement_p99_px,
             s.false_coverage_pixels,
             100.0 * s.false_coverage
         );
@@ -246,6 +254,14 @@ pub fn run(args: Args) -> Result<()> {
             failed.push(format!(
                 "silhouette distance p99 {:.2} px exceeds --require-silhouette-p99 {x}",
                 s.silhouette_p99_px
+            ));
+        }
+    }
+    if let Some(x) = args.require_displacement_p99 {
+        if s.displacement_p99_px as f64 > x {
+            failed.push(format!(
+                "coverage displacement p99 {:.2} px exceeds --require-displacement-p99 {x}",
+                s.displacement_p99_px
             ));
         }
     }

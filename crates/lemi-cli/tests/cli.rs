@@ -438,6 +438,8 @@ fn eval_certificate_gates_and_bad_input() {
     args.extend([
         "--require-silhouette-p99",
         "0",
+        "--require-displacement-p99",
+        "0",
         "--require-false-coverage",
         "0",
     ]);
@@ -449,7 +451,14 @@ fn eval_certificate_gates_and_bad_input() {
         stderr(&o)
     );
     assert!(
-        v["silhouette_p99_px"].is_number() && v["false_coverage_pixels"].is_number(),
+        stderr(&o).contains("--require-displacement-p99"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        v["silhouette_p99_px"].is_number()
+            && v["displacement_p99_px"].is_number()
+            && v["false_coverage_pixels"].is_number(),
         "{v}"
     );
     // bad input
@@ -462,6 +471,10 @@ fn eval_certificate_gates_and_bad_input() {
     assert_clean_error(
         &lemi(&["eval", b, "--require-silhouette-p99", "inf"]),
         "--require-silhouette-p99",
+    );
+    assert_clean_error(
+        &lemi(&["eval", b, "--require-displacement-p99", "-1"]),
+        "--require-displacement-p99",
     );
     assert_clean_error(
         &lemi(&["eval", b, "--require-false-coverage", "2"]),

@@ -75,6 +75,7 @@ impl ViewEval {
             ssim: self.ssim,
             coverage: self.coverage.share,
             silhouette: ErrorSummary::of(&self.silhouette.distances),
+            displacement: ErrorSummary::of(&self.silhouette.displacement),
             false_coverage_pixels: self.silhouette.false_coverage,
             pixels: self.flip.width as u64 * self.flip.height as u64,
         }

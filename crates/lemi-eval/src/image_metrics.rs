@@ -69,6 +69,14 @@ pub struct SilhouetteStats {
     /// Per silhouette pixel of either frame, the distance in pixels to the nearest silhouette pixel
     /// of the other (both directions pooled; `+∞` when the other frame has no silhouette).
     pub distances: crate::stats::PixelErrorStats,
+    /// How far the coverage is displaced: per pixel of either frame's silhouette or covered by
+    /// one frame only, the distance in pixels to the nearest pixel the other frame covers (0 where
+    /// both cover it; `+∞` when the other frame covers nothing). Its maximum is the Hausdorff
+    /// distance between the two coverage sets. Unlike [`Self::distances`] it does not see a
+    /// change of topology as a far outline: a sub-pixel slit that one frame closes counts its
+    /// pixels' distances to the closed slit's sides, not the slit's outline's distance to the
+    /// nearest outline of the other frame.
+    pub displacement: crate::stats::PixelErrorStats,
     /// Pixels the test covers where the reference shows background.
     pub false_coverage: u64,
 }
@@ -493,8 +501,22 @@ pub fn silhouettes(reference: &Frame, test: &Frame) -> Result<SilhouetteStats, E
             values.push(td[i].sqrt() as f32);
         }
     }
+    let (rcd, tcd) = (
+        squared_distance_transform(&rc, w, h),
+        squared_distance_transform(&tc, w, h),
+    );
+    let mut displaced = Vec::new();
+    for i in 0..w * h {
+        match (rc[i], tc[i]) {
+            (true, false) => displaced.push(tcd[i].sqrt() as f32),
+            (false, true) => displaced.push(rcd[i].sqrt() as f32),
+            _ if re[i] || te[i] => displaced.push(0.0),
+            _ => {}
+        }
+    }
     Ok(SilhouetteStats {
         distances: crate::stats::PixelErrorStats::from_values(&values),
+        displacement: crate::stats::PixelErrorStats::from_values(&displaced),
         false_coverage,
     })
 }

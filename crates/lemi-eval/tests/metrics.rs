@@ -199,6 +199,56 @@ fn silhouette_distances_of_known_shifts_and_growths() {
 }
 
 #[test]
+fn coverage_displacement_sees_shifts_but_not_a_closed_slit_as_far() {
+    let reference = disc(30.0, 24.0, 12.0);
+    assert_eq!(
+        silhouettes(&reference, &reference)
+            .unwrap()
+            .displacement
+            .max(),
+        0.0
+    );
+    // fattened by 2 px: the ring's pixels lie 1–2 px from the reference's coverage (its
+    // Hausdorff distance is 2), thinned by 2 px the same from the other side
+    for r in [14.0, 10.0] {
+        let d = silhouettes(&reference, &disc(30.0, 24.0, r))
+            .unwrap()
+            .displacement;
+        assert!(
+            (1.5..=2.5).contains(&d.max()),
+            "radius {r}: max {}",
+            d.max()
+        );
+    }
+    // shifted 3 px: the crescents' pixels up to 3 px from the other disc
+    let d = silhouettes(&reference, &disc(33.0, 24.0, 12.0))
+        .unwrap()
+        .displacement;
+    assert!((2.5..=3.5).contains(&d.max()), "max {}", d.max());
+    // a one-pixel slit through the disc that the test closes: the outline metric finds the
+    // slit's sides far from any outline of the test (up to about the radius), the displacement
+    // only the slit's own pixels, one pixel from covered ones
+    let mut slit = reference.clone();
+    for y in 0..slit.height {
+        let i = (y * slit.width + 30) as usize;
+        slit.depth[i] = INF;
+    }
+    let s = silhouettes(&slit, &reference).unwrap();
+    assert!(s.distances.max() > 8.0, "outline max {}", s.distances.max());
+    assert_eq!(s.displacement.max(), 1.0);
+    // the disc's rows at column 30 (pixel centres 0.5 px off its axis): 24
+    assert_eq!(s.false_coverage, 24);
+    // a thin feature the test drops where nothing else is near: as far as it is from the rest
+    let mut pole = reference.clone();
+    for y in 0..slit.height {
+        let i = (y * slit.width + 60) as usize;
+        pole.depth[i] = 5.0;
+    }
+    let s = silhouettes(&pole, &reference).unwrap();
+    assert!(s.displacement.max() >= 18.0, "{}", s.displacement.max());
+}
+
+#[test]
 fn psnr_of_constant_offset_is_closed_form() {
     let a = map_rgb(&pattern(16, 16), |_, c| c.min(200));
     for d in [1u8, 5, 17] {
@@ -439,6 +489,7 @@ fn verdict_format() {
         ssim: 1.0,
         coverage: 1.0,
         silhouette: ErrorSummary::default(),
+        displacement: ErrorSummary::default(),
         false_coverage_pixels: 0,
         pixels: 1,
     };

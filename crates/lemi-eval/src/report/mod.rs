@@ -81,6 +81,12 @@ pub struct ViewResult {
     /// ([`crate::image_metrics::silhouettes`]); its `count` is the silhouette pixels of both.
     #[serde(default)]
     pub silhouette: ErrorSummary,
+    /// How far the impostor's coverage is displaced from the reference's, in pixels
+    /// ([`crate::image_metrics::SilhouetteStats::displacement`]): a slit or a thin feature one
+    /// frame closes or drops counts its own pixels' distance, not its outline's distance to the
+    /// nearest outline of the other frame.
+    #[serde(default)]
+    pub displacement: ErrorSummary,
     /// Pixels the impostor covers where the reference shows background.
     #[serde(default)]
     pub false_coverage_pixels: u64,
@@ -147,6 +153,13 @@ pub struct Aggregate {
     /// Mean silhouette distance over the silhouette pixels of all views (px).
     #[serde(default, with = "f64_or_inf")]
     pub silhouette_mean_px: f64,
+    /// The largest coverage displacement of any view (px): the largest Hausdorff distance between
+    /// the reference's and the impostor's coverage.
+    #[serde(default, with = "f32_or_inf")]
+    pub displacement_max_px: f32,
+    /// The largest per-view p99 of the coverage displacement (px).
+    #[serde(default, with = "f32_or_inf")]
+    pub displacement_p99_px: f32,
     /// Pixels the impostor covers where the reference shows background, over all views.
     #[serde(default)]
     pub false_coverage_pixels: u64,
@@ -181,6 +194,8 @@ impl Aggregate {
             silhouette_max_px: 0.0,
             silhouette_p99_px: 0.0,
             silhouette_mean_px: 0.0,
+            displacement_max_px: 0.0,
+            displacement_p99_px: 0.0,
             false_coverage_pixels: 0,
             false_coverage: 0.0,
         };
@@ -192,6 +207,8 @@ impl Aggregate {
             a.silhouette_p99_px = a.silhouette_p99_px.max(s.p99);
             outline_sum += s.mean * s.count as f64;
             outline_count += s.count;
+            a.displacement_max_px = a.displacement_max_px.max(v.displacement.max);
+            a.displacement_p99_px = a.displacement_p99_px.max(v.displacement.p99);
             a.false_coverage_pixels += v.false_coverage_pixels;
             pixels += v.pixels as f64;
             a.views += 1;
@@ -537,6 +554,7 @@ mod tests {
             ssim: 0.9,
             coverage: 1.0,
             silhouette: ErrorSummary::default(),
+            displacement: ErrorSummary::default(),
             false_coverage_pixels: 0,
             pixels: 1,
         }

@@ -1,0 +1,192 @@
+//! Looks closely at the silhouettes of one view of a bundle: renders the reference (all geometry)
+//! and the impostor frame at the output size and at `k×` that size (the same camera), and prints
+//! the silhouette distances of [`lemi_eval::silhouettes`] at both (at `k×`, divided by `k`: the
+//! outlines of both renderers at sub-pixel precision). Writes `coverage.png` (1×: grey = both
+//! cover, red = only the impostor, blue = only the reference) for the view.
+//!
+//!     cargo run --release -p lemi-eval --example silhouette_probe -- BUNDLE CELL_ID \
+//!         --eye x,y,z --dir x,y,z [--k 4] [--out DIR]
+//!
+//! Without `--eye`, the corners and the centre of the cell, each looking along every evaluated
+//! direction, and the five worst views by the 1× p99 are printed.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{anyhow, bail, Context, Result};
+use glam::DVec3;
+use lemi_core::camera::Camera;
+use lemi_core::cell::{eval_directions, eval_viewpoints, CellId};
+use lemi_eval::{output_view, silhouettes, EvalOptions};
+use lemi_gpu::{
+    BackendChoice, Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
+    RenderOptions, Renderer, UploadOptions,
+};
+
+fn vec3(s: &str) -> Result<DVec3> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("`{s}` is not x,y,z"))?;
+    match v[..] {
+        [x, y, z] => Ok(DVec3::new(x, y, z)),
+        _ => bail!("`{s}` is not x,y,z"),
+    }
+}
+
+struct Probe {
+    full: GpuScene,
+    reference: Renderer,
+    impostors: ImpostorRenderer,
+    cell: ImpostorCell,
+    fov_x: f64,
+    size: (u32, u32),
+}
+
+struct Views {
+    reference: Frame,
+    impostor: Frame,
+}
+
+impl Probe {
+    fn render(&self, eye: DVec3, dir: DVec3, k: u32) -> Result<Views> {
+        let (w, h) = (self.size.0 * k, self.size.1 * k);
+        let fov_y = 2.0
+            * ((0.5 * self.fov_x.to_radians()).tan() * h as f64 / w as f64)
+                .atan()
+                .to_degrees();
+        let up = if dir.normalize().y.abs() > 0.9 {
+            DVec3::Z
+        } else {
+            DVec3::Y
+        };
+        let view = Camera::new(eye, dir, up, fov_y, w, h)
+            .map_err(|e| anyhow!("camera: {e}"))?
+            .view();
+        let options = RenderOptions::default();
+        Ok(Views {
+            reference: self.reference.render(&self.full, &view, &options)?,
+            impostor: self.impostors.render(&self.cell, &view, &options)?,
+        })
+    }
+}
+
+/// (p99, max, mean) of the silhouette distances, the false coverage and (p99, max) of the
+/// displacement, in output pixels.
+fn summary(v: &Views, k: u32) -> Result<(f32, f32, f32, u64, f32, f32)> {
+    let s = silhouettes(&v.reference, &v.impostor)?;
+    let (d, m) = (&s.distances, &s.displacement);
+    let k = k as f32;
+    Ok((
+        d.p99() / k,
+        d.max() / k,
+        d.mean() as f32 / k,
+        s.false_coverage,
+        m.p99() / k,
+        m.max() / k,
+    ))
+}
+
+/// Grey: both cover; red: only the impostor; blue: only the reference.
+fn coverage_png(v: &Views, path: &std::path::Path) -> Result<()> {
+    let mut img = image::RgbImage::new(v.reference.width, v.reference.height);
+    for (i, px) in img.pixels_mut().enumerate() {
+        let (r, t) = (
+            v.reference.depth[i].is_finite(),
+            v.impostor.depth[i].is_finite(),
+        );
+        *px = image::Rgb(match (r, t) {
+            (true, true) => [128, 128, 128],
+            (false, true) => [255, 0, 0],
+            (true, false) => [0, 80, 255],
+            (false, false) => [0, 0, 0],
+        });
+    }
+    img.save(path)?;
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.len() < 2 {
+        bail!(
+            "usage: silhouette_probe BUNDLE CELL_ID [--eye x,y,z --dir x,y,z] [--k 4] [--out DIR]"
+        );
+    }
+    let (mut eye, mut dir, mut k, mut out) = (None, None, 4u32, PathBuf::from("silhouette-probe"));
+    let mut i = 2;
+    while i + 1 < args.len() {
+        match args[i].as_str() {
+            "--eye" => eye = Some(vec3(&args[i + 1])?),
+            "--dir" => dir = Some(vec3(&args[i + 1])?),
+            "--k" => k = args[i + 1].parse().context("--k")?,
+            "--out" => out = PathBuf::from(&args[i + 1]),
+            f => bail!("unknown flag {f}"),
+        }
+        i += 2;
+    }
+    let opened = lemi_scene::open_bundle(std::path::Path::new(&args[0]), &[], None)?;
+    let (bundle, scene) = (opened.bundle, opened.scene);
+    let id: CellId = args[1].parse().map_err(|e| anyhow!("{e}"))?;
+    let gpu = Gpu::new(BackendChoice::Auto)?;
+    let manifest = bundle.manifest();
+    let (w, h, fov_x) = output_view(manifest, &EvalOptions::default());
+    let cell_box = manifest.grid.cell_of(id).map_err(|e| anyhow!("{e}"))?;
+    let materials = Arc::new(GpuMaterials::upload(
+        &gpu,
+        &scene.materials,
+        &scene.textures,
+    )?);
+    let file = bundle.cell(id)?;
+    let probe = Probe {
+        full: GpuScene::upload(&gpu, &scene, &UploadOptions::default())?,
+        reference: Renderer::new(&gpu)?,
+        impostors: ImpostorRenderer::new(&gpu)?,
+        cell: ImpostorCell::upload_file(&gpu, materials, &scene, &file)?,
+        fov_x,
+        size: (w, h),
+    };
+    let views: Vec<(String, DVec3, DVec3)> = match (eye, dir) {
+        (Some(e), Some(d)) => vec![("given".into(), e, d)],
+        (None, None) => {
+            let mut v = Vec::new();
+            for (l, e) in eval_viewpoints(&cell_box, 0, 1) {
+                if l == "centre" || l.starts_with("corner") {
+                    for (dl, d) in eval_directions(&manifest.params.faces) {
+                        v.push((format!("{l}, looking {dl}"), e, d));
+                    }
+                }
+            }
+            v
+        }
+        _ => bail!("give both --eye and --dir, or neither"),
+    };
+    let mut rows = Vec::new();
+    for (label, e, d) in &views {
+        let one = probe.render(*e, *d, 1)?;
+        let s1 = summary(&one, 1)?;
+        let kx = probe.render(*e, *d, k)?;
+        let sk = summary(&kx, k)?;
+        if views.len() == 1 {
+            std::fs::create_dir_all(&out)?;
+            coverage_png(&kx, &out.join(format!("coverage-{k}x.png")))?;
+        }
+        println!(
+            "{label:32} 1x: p99 {:5.2} max {:6.2} mean {:5.3} false {:6} displ p99 {:5.2} max {:6.2} | {k}x: p99 {:5.2} max {:6.2} displ p99 {:5.2} max {:6.2}",
+            s1.0, s1.1, s1.2, s1.3, s1.4, s1.5, sk.0, sk.1, sk.4, sk.5
+        );
+        rows.push((s1.0, label.clone(), *e, *d, one));
+    }
+    rows.sort_by(|a, b| b.0.total_cmp(&a.0));
+    std::fs::create_dir_all(&out)?;
+    for (n, (p99, label, e, d, v)) in rows.iter().take(5).enumerate() {
+        let path = out.join(format!("coverage-{n}.png"));
+        coverage_png(v, &path)?;
+        println!(
+            "worst {n}: {label} (eye {e}, dir {d}) p99 {p99:.2} → {}",
+            path.display()
+        );
+    }
+    Ok(())
+}
