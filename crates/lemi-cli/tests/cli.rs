@@ -473,7 +473,7 @@ fn eval_certificate_gates_and_bad_input() {
         "--require-silhouette-p99",
     );
     assert_clean_error(
-        &lemi(&["eval", b, "--require-displacement-p99", "-1"]),
+        &lemi(&["eval", b, "--require-displacement-p99", "nan"]),
         "--require-displacement-p99",
     );
     assert_clean_error(
