@@ -46,6 +46,13 @@ pub fn version_for(params: &BakeParams) -> u32 {
 /// drawn. Macro-texels are baked with alpha 0 or 255 and every texture format keeps each texel on
 /// its side of it; the runtime's quad shader and the glTF export (`alphaCutoff`) both use it.
 pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+/// How far (in texels of its layer) every quad is grown beyond its texel rectangle when drawn, so
+/// that neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
+/// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
+/// (found by the no-crack test). The grown rim shows the quad's edge texels (the runtime clamps
+/// its fetch to the rectangle), so it never shows a neighbour's texels from the macro-texture.
+/// [`Quad::drawn_vertices`] applies it; the runtime and the glTF export both draw those vertices.
+pub const QUAD_GROWTH_TEXELS: f64 = 1.0 / 16.0;
 /// Magic bytes of a cell file.
 pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
 /// `format` field of the manifest.
@@ -212,6 +219,35 @@ impl Quad {
         } else {
             [[x, y], [x + w, y], [x + w, y + h], [x, y + h]]
         }
+    }
+
+    /// The quad as drawn: its corners and macro-texel corners (in the order of [`Quad::corners`])
+    /// grown by [`QUAD_GROWTH_TEXELS`] on every side, positions in world space (f32) and texture
+    /// coordinates in macro-texels (not normalised). The growth is computed in f64 from the f32
+    /// corners, so every renderer that draws these vertices (lemi's runtime, the glTF export)
+    /// draws the same f32 numbers. The texture coordinates are the macro-texel edges
+    /// `± QUAD_GROWTH_TEXELS`, exact in f32 (multiples of 1/16 below 2²⁰).
+    pub fn drawn_vertices(&self) -> [([f32; 3], [f32; 2]); 4] {
+        use glam::{DVec2, DVec3};
+        let uv = self
+            .macro_texel_corners()
+            .map(|t| DVec2::new(t[0] as f64, t[1] as f64));
+        let p = self.corners.map(|c| DVec3::from_array(c.map(f64::from)));
+        // texel steps along the quad's edges (in world space and in the macro-texture)
+        let (w, h) = (
+            (self.texels[2].saturating_sub(self.texels[0])).max(1) as f64,
+            (self.texels[3].saturating_sub(self.texels[1])).max(1) as f64,
+        );
+        let e = QUAD_GROWTH_TEXELS;
+        let (du, dv) = ((p[1] - p[0]) * (e / w), (p[3] - p[0]) * (e / h));
+        let (tu, tv) = ((uv[1] - uv[0]) * (e / w), (uv[3] - uv[0]) * (e / h));
+        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        std::array::from_fn(|k| {
+            let (su, sv) = signs[k];
+            let pos = p[k] + du * su + dv * sv;
+            let t = uv[k] + tu * su + tv * sv;
+            (pos.as_vec3().to_array(), [t.x as f32, t.y as f32])
+        })
     }
 }
 
