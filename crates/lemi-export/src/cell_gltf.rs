@@ -7,13 +7,20 @@
 //! any renderer with an alpha test draws it without sorting. In glTF 2.0 terms:
 //!
 //! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture and
-//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices (its corners in the order of
-//!   [`Quad::corners`], world coordinates, f32 as the bundle computes them) and two triangles
-//!   `0 1 2, 0 2 3`. Within a primitive the quads are in the runtime's draw order: by cube face,
-//!   then the nearest layer first (a quad's `layer` counts far to near), ties in the cell's order,
-//!   so depth rejection skips what nearer layers hide. `TEXCOORD_0` is
-//!   [`Quad::macro_texel_corners`] divided by the macro-texture's size (exact in f32: texel edges
-//!   of textures up to 2¹⁶ texels); a reader gets the quad's texel rectangle back by multiplying.
+//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices and two
+//!   triangles `0 1 2, 0 2 3`. The vertices are the ones lemi's runtime draws
+//!   ([`Quad::drawn_vertices`]: the corners in the order of [`Quad::corners`], world coordinates,
+//!   f32, and the macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring
+//!   quads overlap in any renderer). Within a primitive the quads are in the runtime's draw order:
+//!   by cube face, then the nearest layer first (a quad's `layer` counts far to near), ties in the
+//!   cell's order, so depth rejection skips what nearer layers hide. `TEXCOORD_0` holds the grown
+//!   texel coordinates `t` (multiples of 1/16): with [`ExportGeometry::Meshopt`] as u16
+//!   `16·t + 1` (`KHR_mesh_quantization`) that the material's `KHR_texture_transform` maps to
+//!   `t / side`, exactly; with [`ExportGeometry::Plain`] (or a macro-texture side above
+//!   [`MAX_QUANTIZED_SIDE`]) as f32 `t / side`. A reader rounds `t` to get the quad's texel
+//!   rectangle back.
+//! - **Geometry**: with [`ExportGeometry::Meshopt`] every vertex and index view is compressed
+//!   with `EXT_meshopt_compression` (see `document.rs`), losslessly.
 //! - **Materials**: `KHR_materials_unlit` (the layers are pre-shaded, final sRGB colours),
 //!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test), or
 //!   `OPAQUE` for the quads whose texels all pass it ([`opaque_quads`]: as the runtime's opaque

@@ -180,11 +180,9 @@ impl Document {
         normalized: bool,
         bounds: Option<(Vec<f32>, Vec<f32>)>,
     ) -> Result<json::Index<json::Accessor>, ExportError> {
-        let stride = if count == 0 { 0 } else { bytes.len() / count };
-        let view = if count == 0 {
-            self.view(bytes, kind)
-        } else {
-            self.data_view(bytes, count, stride, kind)?
+        let view = match bytes.len().checked_div(count) {
+            Some(stride) => self.data_view(bytes, count, stride, kind)?,
+            None => self.view(bytes, kind),
         };
         let (min, max) = match bounds {
             Some((lo, hi)) => (Some(json::Value::from(lo)), Some(json::Value::from(hi))),

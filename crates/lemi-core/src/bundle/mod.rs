@@ -1370,6 +1370,53 @@ mod tests {
     }
 
     #[test]
+    fn drawn_vertices_grow_the_quad_by_a_sixteenth_texel() {
+        // a 4 x 2 texel quad of a 64² face at distance 8, stored rotated at (10, 20)
+        let rect = crate::compress::TexelRect {
+            x0: 8,
+            y0: 16,
+            x1: 12,
+            y1: 18,
+        };
+        let corners = crate::compress::quad_corners(Face::PosX, 8.0, 64, rect)
+            .map(|c| c.as_vec3().to_array());
+        let q = Quad {
+            face: Face::PosX,
+            layer: 0,
+            texels: [8, 16, 12, 18],
+            corners,
+            macro_index: 0,
+            rect: [10, 20, 2, 4],
+            rotated: true,
+        };
+        let v = q.drawn_vertices();
+        // texel coordinates: the macro-texel corners moved 1/16 texel outwards, exactly
+        let g = QUAD_GROWTH_TEXELS as f32;
+        let t = q.macro_texel_corners();
+        let grown = [(-g, -g), (g, -g), (g, g), (-g, g)];
+        for k in 0..4 {
+            // the quad's u runs along the macro-texture's y when rotated
+            let (du, dv) = grown[k];
+            assert_eq!(
+                v[k].1,
+                [t[k][0] as f32 - dv, t[k][1] as f32 + du],
+                "corner {k}"
+            );
+        }
+        // positions: 1/16 of a texel (2/64 · 8 = 0.25 m) beyond each edge
+        let texel = 2.0 / 64.0 * 8.0;
+        let expected = crate::compress::quad_corners(Face::PosX, 8.0, 64, rect);
+        let step = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        for k in 0..4 {
+            let e = expected[k]
+                + Face::PosX.right() * (step[k].0 * texel / 16.0)
+                + Face::PosX.down() * (step[k].1 * texel / 16.0);
+            let got = glam::DVec3::from_array(v[k].0.map(f64::from));
+            assert!((got - e).length() < 1e-5, "corner {k}: {got} vs {e}");
+        }
+    }
+
+    #[test]
     fn macro_texel_corners_undo_the_rotation() {
         use crate::compress::MacroPlacement;
         // a 3 x 5 micro-texture placed at (10, 20), rotated: footprint 5 x 3
