@@ -7,9 +7,9 @@
 // `lemi render BUNDLE`:
 // - quads: the macro-texture's texels fetched unfiltered (texelFetch) and clamped to the quad's
 //   texel rectangle (recovered from TEXCOORD_0), alpha test at the material's alphaCutoff, the
-//   sRGB bytes written as they are; each quad grown by 1/16 texel on every side (lemi-gpu's
-//   QUAD_GROWTH_TEXELS) so that neighbouring quads overlap instead of leaving pixel-wide cracks
-//   where edges meet;
+//   sRGB bytes written as they are; the files hold the quads as lemi draws them, grown by 1/16
+//   texel on every side (lemi-core's QUAD_GROWTH_TEXELS) so that neighbouring quads overlap
+//   instead of leaving pixel-wide cracks where edges meet;
 // - near geometry: lemi's shading (crates/lemi-gpu/src/shading.wgsl): base colour × texture ×
 //   vertex colour × (ambient 0.3 + sun 0.7 · |n·l|), l = normalize(1, 3, 2), in linear RGB,
 //   encoded to sRGB.
@@ -24,9 +24,12 @@
 
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+// the decoder of EXT_meshopt_compression, which `lemi export` compresses vertices and indices with
+import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 import { predict, locate, cellId } from './predict.js';
 
-const QUAD_GROWTH_TEXELS = 1 / 16;
+// the files' texture coordinates are texel edges ± 1/16 texel (lemi-core's QUAD_GROWTH_TEXELS)
+const TEXEL_GRID = 16;
 // crates/lemi-walk/src/layer_tint.rs: colours of layers 0, 1, … (far to near), repeating
 const PALETTE = [
   [230, 25, 75], [60, 180, 75], [255, 225, 25], [0, 130, 200], [245, 130, 48],
@@ -166,35 +169,33 @@ void main() {
 const quadUniforms = { tint: { value: params.get('tint') === '1' } };
 const nearUniforms = { grey: { value: quadUniforms.tint.value } };
 
-/// Rebuilds one impostor primitive as lemi's runtime draws it: grown quads, texel coordinates,
-/// the quad's texel rectangle and its layer per vertex.
+/// Rebuilds one impostor primitive as lemi's runtime draws it: the quads' vertices as the file
+/// holds them (grown), texel coordinates, the quad's texel rectangle and its layer per vertex.
 function lemiQuads(mesh, info) {
   const g = mesh.geometry;
   const map = mesh.material.map;
   const w = map.image.width;
   const h = map.image.height;
+  // TEXCOORD_0 is either f32 (t / side) or integers 16·t + 1 mapped by KHR_texture_transform,
+  // which three's loader puts in the texture's repeat and offset: t = (uv·repeat + offset)·side
+  const scale = [map.repeat.x * w, map.repeat.y * h];
+  const shift = [map.offset.x * w, map.offset.y * h];
   const p = g.attributes.position.array;
   const uv = g.attributes.uv.array;
   const n = p.length / 12;
-  const position = new Float32Array(12 * n);
+  const position = new Float32Array(p);
   const texel = new Float32Array(8 * n);
   const rect = new Float32Array(16 * n);
   const layer = new Float32Array(4 * n);
   const index = new Uint32Array(6 * n);
-  const signs = [[-1, -1], [1, -1], [1, 1], [-1, 1]];
   const center = info.reference_viewpoint;
   for (let q = 0; q < n; q++) {
     const P = [0, 1, 2, 3].map((k) => [p[12 * q + 3 * k], p[12 * q + 3 * k + 1], p[12 * q + 3 * k + 2]]);
-    const T = [0, 1, 2, 3].map((k) => [Math.round(uv[8 * q + 2 * k] * w), Math.round(uv[8 * q + 2 * k + 1] * h)]);
-    const wq = Math.max(Math.abs(T[1][0] - T[0][0]) + Math.abs(T[1][1] - T[0][1]), 1);
-    const hq = Math.max(Math.abs(T[3][0] - T[0][0]) + Math.abs(T[3][1] - T[0][1]), 1);
-    const e = QUAD_GROWTH_TEXELS;
-    const du = [0, 1, 2].map((i) => (P[1][i] - P[0][i]) * (e / wq));
-    const dv = [0, 1, 2].map((i) => (P[3][i] - P[0][i]) * (e / hq));
-    const tu = [0, 1].map((i) => (T[1][i] - T[0][i]) * (e / wq));
-    const tv = [0, 1].map((i) => (T[3][i] - T[0][i]) * (e / hq));
-    const xs = T.map((t) => t[0]);
-    const ys = T.map((t) => t[1]);
+    // grown texel coordinates, exact on the 1/16-texel grid; the rectangle is their rounding
+    const T = [0, 1, 2, 3].map((k) => [0, 1].map((i) =>
+      Math.round((uv[8 * q + 2 * k + i] * scale[i] + shift[i]) * TEXEL_GRID) / TEXEL_GRID));
+    const xs = T.map((t) => Math.round(t[0]));
+    const ys = T.map((t) => Math.round(t[1]));
     const r = [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
     // the quad's layer: its face is the dominant axis of its centre seen from the reference
     // viewpoint, its layer the one at that distance
@@ -207,9 +208,7 @@ function lemiQuads(mesh, info) {
       if (Math.abs(l.distance - Math.abs(c[axis])) < Math.abs(layers[best].distance - Math.abs(c[axis]))) best = k;
     });
     for (let k = 0; k < 4; k++) {
-      const [su, sv] = signs[k];
-      for (let i = 0; i < 3; i++) position[12 * q + 3 * k + i] = P[k][i] + du[i] * su + dv[i] * sv;
-      for (let i = 0; i < 2; i++) texel[8 * q + 2 * k + i] = T[k][i] + tu[i] * su + tv[i] * sv;
+      texel.set(T[k], 8 * q + 2 * k);
       rect.set(r, 16 * q + 4 * k);
       layer[4 * q + k] = best;
     }
@@ -427,6 +426,7 @@ async function main() {
 
   const scene = new THREE.Scene();
   const loader = new GLTFLoader();
+  loader.setMeshoptDecoder(MeshoptDecoder);
   const cells = new Map(); // id → {state, group, bytes, info, lastWanted}
   let inFlight = 0;
 

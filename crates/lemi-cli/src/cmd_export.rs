@@ -1,4 +1,5 @@
-//! `lemi export BUNDLE -o DIR [--cells …] [--textures png|ktx2] [--with-near] [--viewer]`: one
+//! `lemi export BUNDLE -o DIR [--cells …] [--textures png|ktx2] [--geometry meshopt|plain]
+//! [--with-near] [--viewer]`: one
 //! binary glTF 2.0 file per view cell plus `cells.json` (`lemi-export`, `docs/EXPORT.md`);
 //! `--viewer` adds the web viewer (`web/viewer`, three.js from `web/node_modules`).
 
@@ -7,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::bail;
 use lemi_core::bundle::Bundle;
 use lemi_core::cell::CellId;
-use lemi_export::{ExportOptions, ExportSummary, ExportTextures, PredictionRule};
+use lemi_export::{ExportGeometry, ExportOptions, ExportSummary, ExportTextures, PredictionRule};
 use serde_json::json;
 
 #[derive(clap::Args)]
@@ -25,6 +26,12 @@ pub struct Args {
     /// --texture-format bc7 or bc1).
     #[arg(long, value_enum, default_value = "png")]
     pub textures: TexturesArg,
+    /// How vertex and index data are stored: meshopt (compressed with EXT_meshopt_compression,
+    /// the quads' texture coordinates as integers through KHR_mesh_quantization; about a quarter
+    /// of the bytes, for readers with a meshopt decoder such as three.js and Babylon.js) or plain
+    /// (core glTF 2.0 only, for any reader).
+    #[arg(long, value_enum, default_value = "meshopt")]
+    pub geometry: GeometryArg,
     /// Also export each cell's near geometry with its materials (loads the scene the bundle was
     /// baked from).
     #[arg(long)]
@@ -60,6 +67,28 @@ impl From<TexturesArg> for ExportTextures {
     }
 }
 
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum GeometryArg {
+    Meshopt,
+    Plain,
+}
+
+impl From<GeometryArg> for ExportGeometry {
+    fn from(g: GeometryArg) -> Self {
+        match g {
+            GeometryArg::Meshopt => ExportGeometry::Meshopt,
+            GeometryArg::Plain => ExportGeometry::Plain,
+        }
+    }
+}
+
+/// How the exported files store textures and geometry.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Storage {
+    pub textures: ExportTextures,
+    pub geometry: ExportGeometry,
+}
+
 /// The runtime's prediction rule with its parameters, for `cells.json`.
 pub fn prediction_rule() -> PredictionRule {
     let o = lemi_runtime::PredictOptions::default();
@@ -78,7 +107,7 @@ pub fn export(
     bundle: &Path,
     out: &Path,
     cells: &[String],
-    textures: ExportTextures,
+    storage: Storage,
     with_near: bool,
     scene_override: &[String],
     quiet: bool,
@@ -101,7 +130,8 @@ pub fn export(
     let ids = parse_cells(&opened, cells)?;
     let options = ExportOptions {
         cells: ids,
-        textures,
+        textures: storage.textures,
+        geometry: storage.geometry,
         prediction: prediction_rule(),
         generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
     };
@@ -148,7 +178,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &args.bundle,
         &args.output,
         &args.cells,
-        args.textures.into(),
+        Storage {
+            textures: args.textures.into(),
+            geometry: args.geometry.into(),
+        },
         args.with_near,
         &args.scene_override,
         args.json,
@@ -172,6 +205,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "source_bytes": source,
             "max_bytes_ratio": worst,
             "textures": index.textures,
+            "geometry": index.geometry,
             "near": index.near,
             "viewer": args.viewer,
         });
@@ -181,10 +215,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let quads: usize = index.cells.iter().map(|c| c.quads).sum();
     let near: u64 = index.cells.iter().map(|c| c.near_triangles).sum();
     println!(
-        "exported   {} cells of {}: {quads} quads, {near} near triangles, {} textures",
+        "exported   {} cells of {}: {quads} quads, {near} near triangles, {} textures, {} geometry",
         index.cells.len(),
         args.bundle.display(),
-        index.textures
+        index.textures,
+        index.geometry
     );
     println!(
         "bytes      {:.1} KB of .glb from {:.1} KB of cell files (largest ratio {worst:.3})",

@@ -50,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &args.path,
             &out,
             &[],
-            lemi_export::ExportTextures::Png,
+            crate::cmd_export::Storage::default(),
             !args.no_near,
             &args.scene_override,
             false,

@@ -10,11 +10,13 @@ use anyhow::{bail, Context};
 const VIEWER_FILES: [&str; 3] = ["index.html", "viewer.js", "predict.js"];
 
 /// The files of the three.js package the viewer imports, relative to `node_modules/three`.
-const THREE_FILES: [&str; 6] = [
+const THREE_FILES: [&str; 7] = [
     "LICENSE",
     "build/three.module.js",
     "build/three.core.js",
     "examples/jsm/loaders/GLTFLoader.js",
+    // meshoptimizer's decoder (MIT, WebAssembly inside the module) for EXT_meshopt_compression
+    "examples/jsm/libs/meshopt_decoder.module.js",
     "examples/jsm/utils/BufferGeometryUtils.js",
     "examples/jsm/utils/SkeletonUtils.js",
 ];

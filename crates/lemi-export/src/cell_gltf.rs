@@ -7,13 +7,20 @@
 //! any renderer with an alpha test draws it without sorting. In glTF 2.0 terms:
 //!
 //! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture and
-//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices (its corners in the order of
-//!   [`Quad::corners`], world coordinates, f32 as the bundle computes them) and two triangles
-//!   `0 1 2, 0 2 3`. Within a primitive the quads are in the runtime's draw order: by cube face,
-//!   then the nearest layer first (a quad's `layer` counts far to near), ties in the cell's order,
-//!   so depth rejection skips what nearer layers hide. `TEXCOORD_0` is
-//!   [`Quad::macro_texel_corners`] divided by the macro-texture's size (exact in f32: texel edges
-//!   of textures up to 2¹⁶ texels); a reader gets the quad's texel rectangle back by multiplying.
+//!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices and two
+//!   triangles `0 1 2, 0 2 3`. The vertices are the ones lemi's runtime draws
+//!   ([`Quad::drawn_vertices`]: the corners in the order of [`Quad::corners`], world coordinates,
+//!   f32, and the macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring
+//!   quads overlap in any renderer). Within a primitive the quads are in the runtime's draw order:
+//!   by cube face, then the nearest layer first (a quad's `layer` counts far to near), ties in the
+//!   cell's order, so depth rejection skips what nearer layers hide. `TEXCOORD_0` holds the grown
+//!   texel coordinates `t` (multiples of 1/16): with [`ExportGeometry::Meshopt`] as u16
+//!   `16·t + 1` (`KHR_mesh_quantization`) that the material's `KHR_texture_transform` maps to
+//!   `t / side`, exactly; with [`ExportGeometry::Plain`] (or a macro-texture side above
+//!   [`MAX_QUANTIZED_SIDE`]) as f32 `t / side`. A reader rounds `t` to get the quad's texel
+//!   rectangle back.
+//! - **Geometry**: with [`ExportGeometry::Meshopt`] every vertex and index view is compressed
+//!   with `EXT_meshopt_compression` (see `document.rs`), losslessly.
 //! - **Materials**: `KHR_materials_unlit` (the layers are pre-shaded, final sRGB colours),
 //!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test), or
 //!   `OPAQUE` for the quads whose texels all pass it ([`opaque_quads`]: as the runtime's opaque
@@ -41,13 +48,19 @@ use lemi_core::compress::TextureFormat;
 use lemi_core::Scene;
 use serde_json::json;
 
-use crate::document::{extras, Document};
-use crate::{ExportError, ExportTextures};
+use crate::document::{extras, Document, GeometryBytes};
+use crate::{ExportError, ExportGeometry, ExportTextures};
 
 /// The name of the extension for unlit materials.
 pub const UNLIT: &str = "KHR_materials_unlit";
 /// The name of the extension for KTX2 textures.
 pub const BASISU: &str = "KHR_texture_basisu";
+/// The name of the extension that maps the quads' integer texture coordinates.
+pub const TEXTURE_TRANSFORM: &str = "KHR_texture_transform";
+/// The largest macro-texture side whose quads get integer texture coordinates: `16·side + 2`
+/// must fit a u16 (coordinates in 1/16 texel, shifted by one so that the grown rim at −1/16 is
+/// not negative). Larger macro-textures keep f32 coordinates.
+pub const MAX_QUANTIZED_SIDE: u32 = (u16::MAX as u32 - 2) / 16;
 
 /// One exported cell and the numbers that describe it.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +75,10 @@ pub struct CellGlb {
     pub near_triangles: u64,
     /// Bytes of the near geometry (vertices, indices and material images).
     pub near_bytes: u64,
+    /// Bytes of the quads' vertex and index data, as stored and as decoded.
+    pub quad_bytes: GeometryBytes,
+    /// Primitives of the quads (one per macro-texture and kind): a renderer's draw calls.
+    pub quad_primitives: usize,
 }
 
 /// Whether each quad's texels (its rectangle of its macro-texture) all pass the alpha test, so
@@ -116,6 +133,7 @@ pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
 #[derive(Clone, Copy, Debug)]
 pub struct CellOptions<'a> {
     pub textures: ExportTextures,
+    pub geometry: ExportGeometry,
     /// The bundle's α (radians), recorded in the cell's `extras`.
     pub alpha: f64,
     /// `asset.generator`, e.g. `lemi 0.1.0`.
@@ -131,6 +149,7 @@ pub fn export_cell(
 ) -> Result<CellGlb, ExportError> {
     let CellOptions {
         textures,
+        geometry,
         alpha,
         generator,
     } = *options;
@@ -140,7 +159,7 @@ pub fn export_cell(
             "an HLOD bundle has no impostor layers to export (bake with --strategy lemi)".into(),
         ));
     }
-    let mut doc = Document::new(generator);
+    let mut doc = Document::new(generator, geometry);
     doc.use_extension(UNLIT, false);
     let sampler = doc.root.push(json::texture::Sampler {
         mag_filter: Some(Valid(json::texture::MagFilter::Nearest)),
@@ -184,9 +203,16 @@ pub fn export_cell(
             }
         };
         let texture = doc.root.push(texture);
+        let transform = header
+            .macros
+            .get(i)
+            .and_then(|m| quantized_texcoords(geometry, m.width, m.height));
+        if transform.is_some() {
+            doc.use_extension(TEXTURE_TRANSFORM, true);
+        }
         materials.push([
-            doc.root.push(quad_material(texture, i, true)),
-            doc.root.push(quad_material(texture, i, false)),
+            doc.root.push(quad_material(texture, i, true, transform)),
+            doc.root.push(quad_material(texture, i, false, transform)),
         ]);
     }
 
@@ -207,24 +233,33 @@ pub fn export_cell(
         let info = header.macros.get(m as usize).ok_or_else(|| {
             ExportError::Gltf(format!("a quad uses macro-texture {m}, the cell has fewer"))
         })?;
+        let quantized = quantized_texcoords(geometry, info.width, info.height).is_some();
         let (w, h) = (info.width as f32, info.height as f32);
         let n = end - start;
         let mut positions = Vec::with_capacity(4 * n);
         let mut uvs = Vec::with_capacity(4 * n);
         let mut indices = Vec::with_capacity(6 * n);
         for &k in &order[start..end] {
-            let q = &quads[k];
             let base = positions.len() as u32;
-            positions.extend(q.corners);
-            uvs.extend(
-                q.macro_texel_corners()
-                    .map(|[x, y]| [x as f32 / w, y as f32 / h]),
-            );
+            for (p, uv) in quads[k].drawn_vertices() {
+                positions.push(p);
+                uvs.push(uv);
+            }
             indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         }
-        let position = doc.positions(&positions);
-        let uv = doc.texcoords(&uvs);
-        let index = doc.indices(&indices, positions.len());
+        let position = doc.positions(&positions)?;
+        let uv = if quantized {
+            // multiples of 1/16 texel from −1/16 to side + 1/16: exact as 16·t + 1
+            let texels: Vec<[u16; 2]> = uvs
+                .iter()
+                .map(|t| t.map(|c| (16.0 * c + 1.0).round().clamp(0.0, u16::MAX as f32) as u16))
+                .collect();
+            doc.texcoords_u16(&texels)?
+        } else {
+            let normalised: Vec<[f32; 2]> = uvs.iter().map(|t| [t[0] / w, t[1] / h]).collect();
+            doc.texcoords(&normalised)?
+        };
+        let index = doc.indices(&indices, positions.len())?;
         let material = materials
             .get(m as usize)
             .map(|pair| pair[usize::from(!kind)]);
@@ -238,6 +273,8 @@ pub fn export_cell(
         ));
         start = end;
     }
+    let quad_bytes = doc.geometry_bytes;
+    let quad_primitives = primitives.len();
     let mut nodes = Vec::new();
     if !primitives.is_empty() {
         let mesh = doc.root.push(json::Mesh {
@@ -282,18 +319,18 @@ pub fn export_cell(
             let p: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.position).collect();
             let n: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.normal).collect();
             let mut attributes = vec![
-                (json::mesh::Semantic::Positions, doc.positions(&p)),
-                (json::mesh::Semantic::Normals, doc.normals(&n)),
+                (json::mesh::Semantic::Positions, doc.positions(&p)?),
+                (json::mesh::Semantic::Normals, doc.normals(&n)?),
             ];
             if textured {
                 let uv: Vec<[f32; 2]> = mesh.vertices.iter().map(|v| v.uv).collect();
-                attributes.push((json::mesh::Semantic::TexCoords(0), doc.texcoords(&uv)));
+                attributes.push((json::mesh::Semantic::TexCoords(0), doc.texcoords(&uv)?));
             }
             if mesh.vertices.iter().any(|v| v.color != [255; 4]) {
                 let c: Vec<[u8; 4]> = mesh.vertices.iter().map(|v| v.color).collect();
-                attributes.push((json::mesh::Semantic::Colors(0), doc.colors(&c)));
+                attributes.push((json::mesh::Semantic::Colors(0), doc.colors(&c)?));
             }
-            let index = doc.indices(&mesh.indices, mesh.vertices.len());
+            let index = doc.indices(&mesh.indices, mesh.vertices.len())?;
             near_primitives.push(primitive(attributes, index, Some(material)));
         }
         if !near_primitives.is_empty() {
@@ -353,7 +390,22 @@ pub fn export_cell(
         texture_bytes,
         near_triangles,
         near_bytes,
+        quad_bytes,
+        quad_primitives,
     })
+}
+
+/// The `KHR_texture_transform` (scale, offset) that maps a macro-texture's integer texture
+/// coordinates `16·t + 1` (t in texels) to `t / side`, or `None` when its quads keep f32
+/// coordinates (plain geometry, or a side above [`MAX_QUANTIZED_SIDE`]).
+fn quantized_texcoords(geometry: ExportGeometry, width: u32, height: u32) -> Option<[[f64; 2]; 2]> {
+    (geometry == ExportGeometry::Meshopt
+        && width <= MAX_QUANTIZED_SIDE
+        && height <= MAX_QUANTIZED_SIDE)
+        .then(|| {
+            let (sx, sy) = (1.0 / (16.0 * width as f64), 1.0 / (16.0 * height as f64));
+            [[sx, sy], [-sx, -sy]]
+        })
 }
 
 /// The macro-textures as image bytes and MIME type, in `header.macros` order.
@@ -404,7 +456,20 @@ pub(crate) fn encode_png(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>
 
 /// The material of macro-texture `i`'s quads: alpha-tested (`MASK`), or `opaque` for quads whose
 /// texels all pass the test.
-fn quad_material(texture: json::Index<json::Texture>, i: usize, opaque: bool) -> json::Material {
+fn quad_material(
+    texture: json::Index<json::Texture>,
+    i: usize,
+    opaque: bool,
+    transform: Option<[[f64; 2]; 2]>,
+) -> json::Material {
+    let extensions = transform.map(|[scale, offset]| {
+        let mut ext = json::extensions::texture::Info::default();
+        ext.others.insert(
+            TEXTURE_TRANSFORM.into(),
+            json!({ "offset": offset, "scale": scale }),
+        );
+        ext
+    });
     json::Material {
         alpha_cutoff: (!opaque).then_some(json::material::AlphaCutoff(QUAD_ALPHA_CUTOFF)),
         alpha_mode: Valid(if opaque {
@@ -423,7 +488,7 @@ fn quad_material(texture: json::Index<json::Texture>, i: usize, opaque: bool) ->
             base_color_texture: Some(json::texture::Info {
                 index: texture,
                 tex_coord: 0,
-                extensions: None,
+                extensions,
                 extras: Default::default(),
             }),
             metallic_factor: json::material::StrengthFactor(0.0),

@@ -2,6 +2,14 @@
 //! 4-byte aligned), accessors with the bounds the specification requires, images, textures and
 //! materials, and frames the result as a GLB (`gltf::binary::Glb`). The document model is
 //! gltf-json's (`gltf::json`), so every object is written by the library, not by hand.
+//!
+//! With [`ExportGeometry::Meshopt`] every vertex and index buffer view is stored compressed
+//! through `EXT_meshopt_compression` (A. Kapoulkine's vertex and index codecs, meshoptimizer's
+//! `meshopt_encodeVertexBuffer` / `meshopt_encodeIndexBuffer` through the `meshopt` crate):
+//! lossless, so the decoded bytes are the ones [`ExportGeometry::Plain`] stores as they are. The
+//! compressed bytes live in the GLB's binary chunk (buffer 0); the views themselves point into a
+//! second buffer without data that the extension marks as its fallback (the extension's
+//! "Fallback buffers"), so the extension is required to read the file.
 
 use std::borrow::Cow;
 
@@ -9,12 +17,30 @@ use gltf::json;
 use json::validation::Checked::Valid;
 use json::validation::USize64;
 
-use crate::ExportError;
+use crate::{ExportError, ExportGeometry};
+
+/// The name of the extension for compressed vertex and index data.
+pub const MESHOPT: &str = "EXT_meshopt_compression";
+/// The name of the extension for integer vertex attributes.
+pub const QUANTIZATION: &str = "KHR_mesh_quantization";
 
 /// A document and its binary chunk.
 pub(crate) struct Document {
     pub(crate) root: json::Root,
     pub(crate) bin: Vec<u8>,
+    pub(crate) geometry: ExportGeometry,
+    /// Bytes of the compressed views once decoded: the length of the fallback buffer (buffer 1).
+    fallback_len: usize,
+    /// Bytes of vertex and index data as stored (compressed or not), and decoded.
+    pub(crate) geometry_bytes: GeometryBytes,
+}
+
+/// Bytes of the vertex and index data of a document: as stored in the file, and as a reader
+/// holds them once decoded (equal without compression).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GeometryBytes {
+    pub stored: u64,
+    pub decoded: u64,
 }
 
 /// What a buffer view holds (glTF's `target`): vertex attributes, indices, or neither (images).
@@ -26,7 +52,7 @@ pub(crate) enum ViewKind {
 }
 
 impl Document {
-    pub(crate) fn new(generator: &str) -> Document {
+    pub(crate) fn new(generator: &str, geometry: ExportGeometry) -> Document {
         let root = json::Root {
             asset: json::Asset {
                 version: "2.0".into(),
@@ -38,31 +64,108 @@ impl Document {
         Document {
             root,
             bin: Vec::new(),
+            geometry,
+            fallback_len: 0,
+            geometry_bytes: GeometryBytes::default(),
         }
     }
 
-    /// Appends `bytes` to the binary chunk (4-byte aligned) as a new buffer view.
-    pub(crate) fn view(&mut self, bytes: &[u8], kind: ViewKind) -> json::Index<json::buffer::View> {
+    /// Appends `bytes` to the binary chunk (4-byte aligned) and returns their offset.
+    fn append(&mut self, bytes: &[u8]) -> usize {
         while self.bin.len() % 4 != 0 {
             self.bin.push(0);
         }
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
-        let target = match kind {
-            ViewKind::Vertices => Some(Valid(json::buffer::Target::ArrayBuffer)),
-            ViewKind::Indices => Some(Valid(json::buffer::Target::ElementArrayBuffer)),
-            ViewKind::Other => None,
-        };
+        offset
+    }
+
+    /// Appends `bytes` to the binary chunk (4-byte aligned) as a new buffer view.
+    pub(crate) fn view(&mut self, bytes: &[u8], kind: ViewKind) -> json::Index<json::buffer::View> {
+        let offset = self.append(bytes);
+        if !matches!(kind, ViewKind::Other) {
+            self.geometry_bytes.stored += bytes.len() as u64;
+            self.geometry_bytes.decoded += bytes.len() as u64;
+        }
         self.root.push(json::buffer::View {
             buffer: json::Index::new(0),
             byte_length: USize64::from(bytes.len()),
             byte_offset: Some(USize64::from(offset)),
             byte_stride: None,
             name: None,
-            target,
+            target: target(kind),
             extensions: None,
             extras: Default::default(),
         })
+    }
+
+    /// A buffer view of `count` elements of `stride` bytes (`bytes`), compressed with
+    /// meshoptimizer's codec for `kind` (`ATTRIBUTES` for vertices, `TRIANGLES` for triangle
+    /// indices) into the binary chunk, decoding into the fallback buffer (see the module docs).
+    fn compressed_view(
+        &mut self,
+        bytes: &[u8],
+        count: usize,
+        stride: usize,
+        kind: ViewKind,
+    ) -> Result<json::Index<json::buffer::View>, ExportError> {
+        let (encoded, mode) = match kind {
+            ViewKind::Vertices => (encode_vertices(bytes, stride)?, "ATTRIBUTES"),
+            ViewKind::Indices => (encode_triangles(bytes, stride)?, "TRIANGLES"),
+            ViewKind::Other => {
+                return Err(ExportError::Gltf(
+                    "only vertex and index data are compressed".into(),
+                ))
+            }
+        };
+        let offset = self.append(&encoded);
+        while self.fallback_len % 4 != 0 {
+            self.fallback_len += 1;
+        }
+        let decoded_at = self.fallback_len;
+        self.fallback_len += bytes.len();
+        self.geometry_bytes.stored += encoded.len() as u64;
+        self.geometry_bytes.decoded += bytes.len() as u64;
+        self.use_extension(MESHOPT, true);
+        let mut ext = json::extensions::buffer::View::default();
+        ext.others.insert(
+            MESHOPT.into(),
+            serde_json::json!({
+                "buffer": 0,
+                "byteOffset": offset,
+                "byteLength": encoded.len(),
+                "byteStride": stride,
+                "count": count,
+                "mode": mode,
+            }),
+        );
+        Ok(self.root.push(json::buffer::View {
+            buffer: json::Index::new(1),
+            byte_length: USize64::from(bytes.len()),
+            byte_offset: Some(USize64::from(decoded_at)),
+            // glTF: vertex attribute views may give their stride, index views must not
+            byte_stride: matches!(kind, ViewKind::Vertices).then_some(json::buffer::Stride(stride)),
+            name: None,
+            target: target(kind),
+            extensions: Some(ext),
+            extras: Default::default(),
+        }))
+    }
+
+    /// A view of vertex or index data: compressed with [`ExportGeometry::Meshopt`], else as is.
+    fn data_view(
+        &mut self,
+        bytes: &[u8],
+        count: usize,
+        stride: usize,
+        kind: ViewKind,
+    ) -> Result<json::Index<json::buffer::View>, ExportError> {
+        match (self.geometry, kind) {
+            (ExportGeometry::Meshopt, ViewKind::Vertices | ViewKind::Indices) => {
+                self.compressed_view(bytes, count, stride, kind)
+            }
+            _ => Ok(self.view(bytes, kind)),
+        }
     }
 
     /// A tightly packed accessor over a new buffer view holding `bytes`.
@@ -76,13 +179,16 @@ impl Document {
         type_: json::accessor::Type,
         normalized: bool,
         bounds: Option<(Vec<f32>, Vec<f32>)>,
-    ) -> json::Index<json::Accessor> {
-        let view = self.view(bytes, kind);
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
+        let view = match bytes.len().checked_div(count) {
+            Some(stride) => self.data_view(bytes, count, stride, kind)?,
+            None => self.view(bytes, kind),
+        };
         let (min, max) = match bounds {
             Some((lo, hi)) => (Some(json::Value::from(lo)), Some(json::Value::from(hi))),
             None => (None, None),
         };
-        self.root.push(json::Accessor {
+        Ok(self.root.push(json::Accessor {
             buffer_view: Some(view),
             byte_offset: None,
             count: USize64::from(count),
@@ -95,11 +201,14 @@ impl Document {
             name: None,
             normalized,
             sparse: None,
-        })
+        }))
     }
 
     /// `POSITION`: three f32 per vertex, with the bounds glTF requires.
-    pub(crate) fn positions(&mut self, p: &[[f32; 3]]) -> json::Index<json::Accessor> {
+    pub(crate) fn positions(
+        &mut self,
+        p: &[[f32; 3]],
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];
         for v in p {
@@ -120,7 +229,10 @@ impl Document {
     }
 
     /// `NORMAL`: three f32 per vertex.
-    pub(crate) fn normals(&mut self, n: &[[f32; 3]]) -> json::Index<json::Accessor> {
+    pub(crate) fn normals(
+        &mut self,
+        n: &[[f32; 3]],
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         self.accessor(
             bytemuck_f32(n.iter().flatten()).as_slice(),
             ViewKind::Vertices,
@@ -133,7 +245,10 @@ impl Document {
     }
 
     /// `TEXCOORD_n`: two f32 per vertex.
-    pub(crate) fn texcoords(&mut self, uv: &[[f32; 2]]) -> json::Index<json::Accessor> {
+    pub(crate) fn texcoords(
+        &mut self,
+        uv: &[[f32; 2]],
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         self.accessor(
             bytemuck_f32(uv.iter().flatten()).as_slice(),
             ViewKind::Vertices,
@@ -145,8 +260,31 @@ impl Document {
         )
     }
 
+    /// `TEXCOORD_n` as two unsigned 16-bit integers per vertex (not normalised), which
+    /// `KHR_mesh_quantization` allows (and which makes the extension required); a material maps
+    /// them to texture coordinates through `KHR_texture_transform`'s scale.
+    pub(crate) fn texcoords_u16(
+        &mut self,
+        uv: &[[u16; 2]],
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
+        self.use_extension(QUANTIZATION, true);
+        let bytes: Vec<u8> = uv.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+        self.accessor(
+            &bytes,
+            ViewKind::Vertices,
+            uv.len(),
+            json::accessor::ComponentType::U16,
+            json::accessor::Type::Vec2,
+            false,
+            None,
+        )
+    }
+
     /// `COLOR_0`: four normalised unsigned bytes per vertex (linear RGBA).
-    pub(crate) fn colors(&mut self, c: &[[u8; 4]]) -> json::Index<json::Accessor> {
+    pub(crate) fn colors(
+        &mut self,
+        c: &[[u8; 4]],
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         let bytes: Vec<u8> = c.iter().flatten().copied().collect();
         self.accessor(
             &bytes,
@@ -165,7 +303,7 @@ impl Document {
         &mut self,
         indices: &[u32],
         vertex_count: usize,
-    ) -> json::Index<json::Accessor> {
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         if vertex_count <= u16::MAX as usize {
             let bytes: Vec<u8> = indices
                 .iter()
@@ -236,6 +374,20 @@ impl Document {
                 extras: Default::default(),
             }];
         }
+        if self.fallback_len > 0 {
+            // the buffer the compressed views decode into: no data, marked as the extension's
+            // fallback (readers that know the extension never load it)
+            let mut ext = json::extensions::buffer::Buffer::default();
+            ext.others
+                .insert(MESHOPT.into(), serde_json::json!({ "fallback": true }));
+            self.root.buffers.push(json::Buffer {
+                byte_length: USize64::from(self.fallback_len),
+                name: Some("meshopt fallback".into()),
+                uri: None,
+                extensions: Some(ext),
+                extras: Default::default(),
+            });
+        }
         let mut json_bytes = self
             .root
             .to_vec()
@@ -269,6 +421,73 @@ impl Document {
         glb.to_vec()
             .map_err(|e| ExportError::Gltf(format!("framing the GLB: {e}")))
     }
+}
+
+fn target(kind: ViewKind) -> Option<json::validation::Checked<json::buffer::Target>> {
+    match kind {
+        ViewKind::Vertices => Some(Valid(json::buffer::Target::ArrayBuffer)),
+        ViewKind::Indices => Some(Valid(json::buffer::Target::ElementArrayBuffer)),
+        ViewKind::Other => None,
+    }
+}
+
+/// meshoptimizer's vertex codec over `bytes`, elements of `stride` bytes (a multiple of 4, at
+/// most 256, as `EXT_meshopt_compression` requires), level 2 (its default), bitstream version 0,
+/// the one the extension specifies (checked: a newer codec version would not be readable).
+fn encode_vertices(bytes: &[u8], stride: usize) -> Result<Vec<u8>, ExportError> {
+    fn encode<const S: usize>(bytes: &[u8]) -> Result<Vec<u8>, ExportError> {
+        let elements: Vec<[u8; S]> = bytes
+            .chunks_exact(S)
+            .map(|c| std::array::from_fn(|i| c[i]))
+            .collect();
+        meshopt::encode_vertex_buffer(&elements)
+            .map_err(|e| ExportError::Gltf(format!("meshopt vertex encoding: {e}")))
+    }
+    let encoded = match stride {
+        4 => encode::<4>(bytes),
+        8 => encode::<8>(bytes),
+        12 => encode::<12>(bytes),
+        16 => encode::<16>(bytes),
+        _ => Err(ExportError::Gltf(format!(
+            "no vertex codec for {stride}-byte vertices"
+        ))),
+    }?;
+    // the codec's header byte: 0xa0 | version
+    if encoded.first() != Some(&0xa0) {
+        return Err(ExportError::Gltf(format!(
+            "meshoptimizer wrote vertex codec header {:?}; EXT_meshopt_compression reads version 0 (0xa0) only",
+            encoded.first()
+        )));
+    }
+    Ok(encoded)
+}
+
+/// meshoptimizer's index codec over triangle indices of `stride` bytes (2 or 4).
+fn encode_triangles(bytes: &[u8], stride: usize) -> Result<Vec<u8>, ExportError> {
+    let indices: Vec<u32> = match stride {
+        2 => bytes
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]) as u32)
+            .collect(),
+        4 => bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
+        _ => {
+            return Err(ExportError::Gltf(format!(
+                "no index codec for {stride}-byte indices"
+            )))
+        }
+    };
+    if indices.len() % 3 != 0 {
+        return Err(ExportError::Gltf(format!(
+            "{} indices are not whole triangles",
+            indices.len()
+        )));
+    }
+    let vertex_count = indices.iter().max().map_or(0, |&m| m as usize + 1);
+    meshopt::encode_index_buffer(&indices, vertex_count)
+        .map_err(|e| ExportError::Gltf(format!("meshopt index encoding: {e}")))
 }
 
 fn bytemuck_f32<'a>(values: impl Iterator<Item = &'a f32>) -> Vec<u8> {

@@ -77,7 +77,16 @@ pub struct CellIndexEntry {
     pub quads: usize,
     pub macro_textures: usize,
     pub texture_bytes: u64,
+    /// Bytes of the quads' vertex and index data as stored (compressed with `meshopt`).
+    #[serde(default)]
+    pub quad_bytes: u64,
+    /// The quads' primitives (one per macro-texture and kind): a renderer's draw calls.
+    #[serde(default)]
+    pub quad_primitives: usize,
     pub near_triangles: u64,
+    /// Bytes of the near geometry (vertices, indices and its material images; 0 without it).
+    #[serde(default)]
+    pub near_bytes: u64,
 }
 
 /// What the bundle was baked from.
@@ -104,6 +113,9 @@ pub struct ExportIndex {
     pub textures: String,
     /// The bundle's texture format (`png`, `bc7`, `bc1`).
     pub bundle_texture_format: String,
+    /// How vertex and index data are stored: `meshopt` (`EXT_meshopt_compression`) or `plain`.
+    #[serde(default)]
+    pub geometry: String,
     /// Whether the cell files hold the near geometry.
     pub near: bool,
     pub grid: IndexGrid,
@@ -134,6 +146,7 @@ impl ExportIndex {
                 .collect(),
             textures: options.textures.name().into(),
             bundle_texture_format: manifest.params.texture_format.name().into(),
+            geometry: options.geometry.name().into(),
             near,
             grid: IndexGrid {
                 origin: grid.origin.to_array(),
@@ -159,7 +172,10 @@ impl ExportIndex {
             quads: glb.quads,
             macro_textures: glb.macro_textures,
             texture_bytes: glb.texture_bytes,
+            quad_bytes: glb.quad_bytes.stored,
+            quad_primitives: glb.quad_primitives,
             near_triangles: glb.near_triangles,
+            near_bytes: glb.near_bytes,
         });
     }
 

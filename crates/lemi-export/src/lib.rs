@@ -18,6 +18,7 @@ use lemi_core::cell::CellId;
 use lemi_core::Scene;
 
 pub use cell_gltf::{export_cell, opaque_quads, quad_order, CellGlb, CellOptions};
+pub use document::{GeometryBytes, MESHOPT, QUANTIZATION};
 pub use index::{CellIndexEntry, ExportIndex, PredictionRule, INDEX_FILE, INDEX_FORMAT};
 
 /// How the macro-textures are stored in the exported files.
@@ -36,6 +37,27 @@ impl ExportTextures {
         match self {
             ExportTextures::Png => "png",
             ExportTextures::Ktx2 => "ktx2",
+        }
+    }
+}
+
+/// How the vertex and index data are stored in the exported files.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ExportGeometry {
+    /// Compressed (`EXT_meshopt_compression`, lossless) with the quads' texture coordinates as
+    /// 16-bit integers (`KHR_mesh_quantization`, `KHR_texture_transform`): about a quarter of
+    /// the bytes; needs a reader with a meshopt decoder (three.js, Babylon.js, glTFast).
+    #[default]
+    Meshopt,
+    /// Core glTF 2.0 only (f32 attributes, u16/u32 indices): any reader.
+    Plain,
+}
+
+impl ExportGeometry {
+    pub fn name(self) -> &'static str {
+        match self {
+            ExportGeometry::Meshopt => "meshopt",
+            ExportGeometry::Plain => "plain",
         }
     }
 }
@@ -69,6 +91,7 @@ pub struct ExportOptions {
     /// The cells to export (default: every baked cell, in manifest order).
     pub cells: Option<Vec<CellId>>,
     pub textures: ExportTextures,
+    pub geometry: ExportGeometry,
     /// The prediction rule a client streams the cells by, recorded in `cells.json`.
     pub prediction: PredictionRule,
     /// `asset.generator` and the index's `generator`, e.g. `lemi 0.1.0`.
@@ -113,6 +136,7 @@ pub fn export_bundle(
     let mut index = ExportIndex::new(manifest, options, scene.is_some());
     let cell_options = CellOptions {
         textures: options.textures,
+        geometry: options.geometry,
         alpha: manifest.params.alpha,
         generator: &options.generator,
     };

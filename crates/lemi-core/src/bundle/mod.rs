@@ -46,6 +46,13 @@ pub fn version_for(params: &BakeParams) -> u32 {
 /// drawn. Macro-texels are baked with alpha 0 or 255 and every texture format keeps each texel on
 /// its side of it; the runtime's quad shader and the glTF export (`alphaCutoff`) both use it.
 pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+/// How far (in texels of its layer) every quad is grown beyond its texel rectangle when drawn, so
+/// that neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
+/// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
+/// (found by the no-crack test). The grown rim shows the quad's edge texels (the runtime clamps
+/// its fetch to the rectangle), so it never shows a neighbour's texels from the macro-texture.
+/// [`Quad::drawn_vertices`] applies it; the runtime and the glTF export both draw those vertices.
+pub const QUAD_GROWTH_TEXELS: f64 = 1.0 / 16.0;
 /// Magic bytes of a cell file.
 pub const CELL_MAGIC: &[u8; 8] = b"LEMICELL";
 /// `format` field of the manifest.
@@ -212,6 +219,35 @@ impl Quad {
         } else {
             [[x, y], [x + w, y], [x + w, y + h], [x, y + h]]
         }
+    }
+
+    /// The quad as drawn: its corners and macro-texel corners (in the order of [`Quad::corners`])
+    /// grown by [`QUAD_GROWTH_TEXELS`] on every side, positions in world space (f32) and texture
+    /// coordinates in macro-texels (not normalised). The growth is computed in f64 from the f32
+    /// corners, so every renderer that draws these vertices (lemi's runtime, the glTF export)
+    /// draws the same f32 numbers. The texture coordinates are the macro-texel edges
+    /// `± QUAD_GROWTH_TEXELS`, exact in f32 (multiples of 1/16 below 2²⁰).
+    pub fn drawn_vertices(&self) -> [([f32; 3], [f32; 2]); 4] {
+        use glam::{DVec2, DVec3};
+        let uv = self
+            .macro_texel_corners()
+            .map(|t| DVec2::new(t[0] as f64, t[1] as f64));
+        let p = self.corners.map(|c| DVec3::from_array(c.map(f64::from)));
+        // texel steps along the quad's edges (in world space and in the macro-texture)
+        let (w, h) = (
+            (self.texels[2].saturating_sub(self.texels[0])).max(1) as f64,
+            (self.texels[3].saturating_sub(self.texels[1])).max(1) as f64,
+        );
+        let e = QUAD_GROWTH_TEXELS;
+        let (du, dv) = ((p[1] - p[0]) * (e / w), (p[3] - p[0]) * (e / h));
+        let (tu, tv) = ((uv[1] - uv[0]) * (e / w), (uv[3] - uv[0]) * (e / h));
+        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        std::array::from_fn(|k| {
+            let (su, sv) = signs[k];
+            let pos = p[k] + du * su + dv * sv;
+            let t = uv[k] + tu * su + tv * sv;
+            (pos.as_vec3().to_array(), [t.x as f32, t.y as f32])
+        })
     }
 }
 
@@ -1331,6 +1367,53 @@ mod tests {
         let bc7 = p.hash();
         p.texture_format = TextureFormat::Bc1;
         assert!(p.hash() != bc7 && p.hash() != png);
+    }
+
+    #[test]
+    fn drawn_vertices_grow_the_quad_by_a_sixteenth_texel() {
+        // a 4 x 2 texel quad of a 64² face at distance 8, stored rotated at (10, 20)
+        let rect = crate::compress::TexelRect {
+            x0: 8,
+            y0: 16,
+            x1: 12,
+            y1: 18,
+        };
+        let corners = crate::compress::quad_corners(Face::PosX, 8.0, 64, rect)
+            .map(|c| c.as_vec3().to_array());
+        let q = Quad {
+            face: Face::PosX,
+            layer: 0,
+            texels: [8, 16, 12, 18],
+            corners,
+            macro_index: 0,
+            rect: [10, 20, 2, 4],
+            rotated: true,
+        };
+        let v = q.drawn_vertices();
+        // texel coordinates: the macro-texel corners moved 1/16 texel outwards, exactly
+        let g = QUAD_GROWTH_TEXELS as f32;
+        let t = q.macro_texel_corners();
+        let grown = [(-g, -g), (g, -g), (g, g), (-g, g)];
+        for k in 0..4 {
+            // the quad's u runs along the macro-texture's y when rotated
+            let (du, dv) = grown[k];
+            assert_eq!(
+                v[k].1,
+                [t[k][0] as f32 - dv, t[k][1] as f32 + du],
+                "corner {k}"
+            );
+        }
+        // positions: 1/16 of a texel (2/64 · 8 = 0.25 m) beyond each edge
+        let texel = 2.0 / 64.0 * 8.0;
+        let expected = crate::compress::quad_corners(Face::PosX, 8.0, 64, rect);
+        let step = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        for k in 0..4 {
+            let e = expected[k]
+                + Face::PosX.right() * (step[k].0 * texel / 16.0)
+                + Face::PosX.down() * (step[k].1 * texel / 16.0);
+            let got = glam::DVec3::from_array(v[k].0.map(f64::from));
+            assert!((got - e).length() < 1e-5, "corner {k}: {got} vs {e}");
+        }
     }
 
     #[test]

@@ -46,12 +46,10 @@ const QUAD_ATTRIBUTES: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
     3 => Uint32x2,
 ];
 
-/// How far (in texels of its layer) every quad is grown beyond its texel rectangle, so that
-/// neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
-/// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
-/// (found by the no-crack test). The grown rim shows the quad's edge texels (the fetch is clamped
-/// to the rectangle), so it never shows a neighbour's texels from the macro-texture.
-pub const QUAD_GROWTH_TEXELS: f64 = 1.0 / 16.0;
+/// How far (in texels of its layer) every quad is grown beyond its texel rectangle (the bundle's
+/// [`lemi_core::bundle::QUAD_GROWTH_TEXELS`], applied by [`Quad::drawn_vertices`], which the glTF
+/// export draws too).
+pub use lemi_core::bundle::QUAD_GROWTH_TEXELS;
 
 pub(super) fn quad_vertex_layout() -> wgpu::VertexBufferLayout<'static> {
     wgpu::VertexBufferLayout {
@@ -145,19 +143,6 @@ pub(super) fn quad_geometry(
     for &k in &order {
         let q = &quads[k];
         let base = vertices.len() as u32;
-        let uv = q
-            .macro_texel_corners()
-            .map(|t| glam::DVec2::new(t[0] as f64, t[1] as f64));
-        let p = q.corners.map(|c| glam::DVec3::from_array(c.map(f64::from)));
-        // texel steps along the quad's edges (in world space and in the macro-texture)
-        let (w, h) = (
-            (q.texels[2].saturating_sub(q.texels[0])).max(1) as f64,
-            (q.texels[3].saturating_sub(q.texels[1])).max(1) as f64,
-        );
-        let e = QUAD_GROWTH_TEXELS;
-        let (du, dv) = ((p[1] - p[0]) * (e / w), (p[3] - p[0]) * (e / h));
-        let (tu, tv) = ((uv[1] - uv[0]) * (e / w), (uv[3] - uv[0]) * (e / h));
-        let signs = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
         let [x, y, rw, rh] = q.rect;
         let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
         let first = indices.len() as u32;
@@ -179,14 +164,11 @@ pub(super) fn quad_geometry(
         let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
             continue;
         };
-        for ((pk, uvk), (su, sv)) in p.iter().zip(&uv).zip(signs) {
-            let pos = *pk + du * su + dv * sv;
-            let t = *uvk + tu * su + tv * sv;
-            let position = pos.as_vec3();
-            b.add(position.as_dvec3());
+        for (position, uv) in q.drawn_vertices() {
+            b.add(glam::Vec3::from_array(position).as_dvec3());
             vertices.push(QuadVertex {
-                position: position.to_array(),
-                uv: [t.x as f32, t.y as f32],
+                position,
+                uv,
                 rect,
                 offset,
             });
