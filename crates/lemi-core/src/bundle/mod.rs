@@ -1185,8 +1185,18 @@ mod tests {
         assert!(err.contains("hlod.bin"), "{err}");
     }
 
-    /// `sample_cell` with its 64² macro-texture block-compressed in KTX2.
+    /// `sample_cell` with its 64² macro-texture block-compressed in a Zstandard-supercompressed
+    /// KTX2 (as bakes write them).
     fn block_cell(format: TextureFormat) -> (CellFile, Vec<u8>) {
+        block_cell_with(format, crate::compress::Supercompression::Zstd)
+    }
+
+    /// `sample_cell` with its 64² macro-texture block-compressed in KTX2, supercompressed with `sc`
+    /// (`None`: as bakes wrote them before Zstandard).
+    fn block_cell_with(
+        format: TextureFormat,
+        sc: crate::compress::Supercompression,
+    ) -> (CellFile, Vec<u8>) {
         let rgba: Vec<u8> = (0..64 * 64)
             .flat_map(|i| {
                 [
@@ -1202,14 +1212,21 @@ mod tests {
         let mut c = sample_cell();
         c.header.texture_format = format;
         c.header.macros[0].name = "macro0.ktx2".into();
-        c.macro_blobs = vec![crate::compress::write_ktx2(block, 64, 64, &[blocks])];
+        c.macro_blobs = vec![crate::compress::write_ktx2(block, 64, 64, &[blocks], sc).unwrap()];
         (c, rgba)
     }
 
     #[test]
     fn block_compressed_cells_are_version_4_and_round_trip() {
-        for format in [TextureFormat::Bc7, TextureFormat::Bc1] {
-            let (c, rgba) = block_cell(format);
+        use crate::compress::Supercompression;
+        for (format, sc) in [
+            (TextureFormat::Bc7, Supercompression::Zstd),
+            (TextureFormat::Bc1, Supercompression::Zstd),
+            // as written before Zstandard: still read
+            (TextureFormat::Bc7, Supercompression::None),
+            (TextureFormat::Bc1, Supercompression::None),
+        ] {
+            let (c, rgba) = block_cell_with(format, sc);
             let bytes = c.encode().unwrap();
             assert_eq!(bytes[8..12], BLOCK_BUNDLE_VERSION.to_le_bytes());
             let back = CellFile::decode(&bytes).unwrap();
