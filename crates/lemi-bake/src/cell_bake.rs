@@ -33,7 +33,7 @@ use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
     compress_face, encode_blocks, pack_cell, write_ktx2, CompressError, CompressOptions,
-    FaceLayers, MicroTextureOptions, PackingOptions, TextureFormat,
+    FaceLayers, MicroTextureOptions, PackingOptions, Supercompression, TextureFormat,
 };
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;
@@ -240,7 +240,10 @@ impl<'a> Baker<'a> {
                     .par_iter()
                     .map(|m| {
                         let (blocks, stats) = encode_blocks(block, m.width, m.height, &m.rgba)?;
-                        Ok((write_ktx2(block, m.width, m.height, &[blocks]), stats.bytes))
+                        let ktx2 =
+                            write_ktx2(block, m.width, m.height, &[blocks], Supercompression::Zstd)
+                                .map_err(|e| CompressError::Invalid(e.to_string()))?;
+                        Ok((ktx2, stats.bytes))
                     })
                     .collect::<Result<_, lemi_core::compress::CompressError>>()
                     .map_err(|source| BakeError::Compress {

@@ -1112,7 +1112,7 @@ fn resume_rebakes_cells_that_moved() {
 
 /// `--texture-format bc7|bc1`: the same cell as the PNG bake, quad for quad (the texel rectangles
 /// exact), each quad's footprint on 4×4 block boundaries, every texel's alpha on the same side of
-/// 128 after decoding the blocks, colours close; cells of version 4 in a bundle that reads back.
+/// 128 after decoding the blocks, colours close; cells of version 5 in a bundle that reads back.
 #[test]
 fn block_formats_keep_every_quad_and_the_alpha_test() {
     use lemi_core::bundle::BLOCK_BUNDLE_VERSION;
@@ -1221,7 +1221,7 @@ fn block_formats_keep_every_quad_and_the_alpha_test() {
         };
         assert!(rmse < bound, "{format}: RMS colour error {rmse}");
     }
-    // a whole bundle in BC1: manifest and cells of version 4, read back by the one reader
+    // a whole bundle in BC1: manifest and cells of version 5, read back by the one reader
     let dir = tempfile::tempdir().unwrap();
     let bundle = dir.path().join("bundle");
     let p = BakeParams {

@@ -101,7 +101,8 @@ pub struct Args {
     #[arg(long, allow_hyphen_values = true)]
     pub hlod_band_factor: Option<f64>,
     /// How the macro-textures are stored: png (lossless, RGBA8 in texture memory), bc7 (16 bytes
-    /// a 4×4 block) or bc1 (8 bytes a block, punch-through alpha), both in KTX2.
+    /// a 4×4 block) or bc1 (8 bytes a block, punch-through alpha), both in KTX2 supercompressed
+    /// with Zstandard.
     #[arg(long, default_value = "png", value_parser = parse_texture_format)]
     pub texture_format: TextureFormat,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).

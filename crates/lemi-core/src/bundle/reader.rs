@@ -435,6 +435,19 @@ mod tests {
         manifest.write(&dir).unwrap();
         let e = Bundle::open(&dir).unwrap_err();
         assert!(e.to_string().contains("version 1"), "{e}");
+        // a block-compressed bundle is version 5, or 4 when baked before version 5; a PNG bundle
+        // is neither
+        for v in [4, 5] {
+            manifest.version = v;
+            let path = manifest_path(&dir);
+            let decode = |m: &Manifest| Manifest::decode(&path, &m.encode().unwrap());
+            let e = decode(&manifest).unwrap_err();
+            assert!(e.to_string().contains(&format!("version {v}")), "{e}");
+            let mut block = manifest.clone();
+            block.params.texture_format = crate::compress::TextureFormat::Bc1;
+            block.params_hash = block.params.hash();
+            assert_eq!(decode(&block).unwrap().version, v);
+        }
         std::fs::write(manifest_path(&dir), b"{").unwrap();
         assert!(Bundle::open(&dir).is_err());
         let e = Bundle::open(&dir.join("missing")).unwrap_err();

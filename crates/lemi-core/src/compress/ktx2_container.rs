@@ -4,15 +4,19 @@
 //! - Khronos KTX File Format Specification 2.0 (KTX 2.0): sec. 3.1 identifier, 3.2 header,
 //!   3.3 index, 3.9 level index, 3.10 data format descriptor, 3.11 key/value data (`KTXwriter`),
 //!   3.13 mip level data (levels stored smallest first, each aligned to
-//!   `lcm(texel block size, 4)`; no supercompression);
+//!   `lcm(texel block size, 4)` without supercompression, unaligned with it), and
+//!   `supercompressionScheme` 2, Zstandard (sec. 3.12.3: each level compressed on its own, the
+//!   level index giving its compressed and uncompressed lengths; no global data);
+//! - Zstandard (RFC 8878) through the reference library (`zstd` crate);
 //! - Khronos Data Format Specification 1.3, sec. 5 (the basic descriptor block) and sec. 5.6
 //!   (colour models `KHR_DF_MODEL_BC1A` = 128 and `KHR_DF_MODEL_BC7` = 134; BC1A has a colour
 //!   sample and an alpha sample over the same 64 bits, BC7 one colour sample of 128 bits);
 //! - Vulkan formats `VK_FORMAT_BC1_RGBA_SRGB_BLOCK` (134) and `VK_FORMAT_BC7_SRGB_BLOCK` (146): the
 //!   macro-textures hold sRGB-encoded colours with straight alpha.
 //!
-//! The reader accepts what the writer writes (the two formats, 2D, one face, no supercompression)
-//! and checks everything it relies on, so damaged data is a [`Ktx2Error`], never a panic.
+//! The reader accepts what the writer writes (the two formats, 2D, one face, no supercompression
+//! or Zstandard) and checks everything it relies on, so damaged data is a [`Ktx2Error`], never a
+//! panic: a level's Zstandard data must inflate to exactly the level's size.
 //! [`Ktx2Texture::levels`] are largest first.
 
 use super::block_compression::{BlockFormat, BLOCK};
@@ -33,6 +37,34 @@ const KHR_DF_SAMPLE_DATATYPE_LINEAR: u8 = 0x10;
 const HEADER_BYTES: usize = 80;
 const LEVEL_INDEX_BYTES: usize = 24;
 const WRITER: &str = "lemi";
+/// The largest side the reader accepts (the packer's sides are at most 4096; 16384 is the
+/// largest 2D texture most GPUs sample).
+pub const MAX_SIDE: u32 = 16384;
+const SCHEME_NONE: u32 = 0;
+const SCHEME_ZSTD: u32 = 2;
+/// The Zstandard level lemi writes: 19, the highest of the ordinary levels (20 to 22 need more
+/// memory and gain < 0.1 % on macro-textures; level 9 is 4-8× faster and ~10 % larger).
+pub const ZSTD_LEVEL: i32 = 19;
+
+/// The KTX2 `supercompressionScheme` of a file.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Supercompression {
+    /// 0: the levels are the blocks as uploaded.
+    #[default]
+    None,
+    /// 2: each level Zstandard-compressed ([`ZSTD_LEVEL`]).
+    Zstd,
+}
+
+impl Supercompression {
+    /// The header's `supercompressionScheme`.
+    pub fn scheme(self) -> u32 {
+        match self {
+            Supercompression::None => SCHEME_NONE,
+            Supercompression::Zstd => SCHEME_ZSTD,
+        }
+    }
+}
 
 /// Errors of reading a KTX2 file; each says what is wrong.
 #[derive(Debug, thiserror::Error, PartialEq, Eq)]
@@ -49,6 +81,8 @@ pub enum Ktx2Error {
     BadDfd(String),
     #[error("KTX2 level {level}: {reason}")]
     BadLevel { level: usize, reason: String },
+    #[error("KTX2 writer: {0}")]
+    Write(String),
 }
 
 /// A block-compressed texture read from a KTX2 file.
@@ -57,6 +91,8 @@ pub struct Ktx2Texture {
     pub format: BlockFormat,
     pub width: u32,
     pub height: u32,
+    /// How the file stored the levels (they are inflated here).
+    pub supercompression: Supercompression,
     /// Block data per mip level, level 0 (largest) first.
     pub levels: Vec<Vec<u8>>,
 }
@@ -109,13 +145,46 @@ fn pad_to(out: &mut Vec<u8>, align: usize) {
     }
 }
 
-/// Writes a KTX2 file of `levels` (level 0 first, each `format.image_bytes` of its level size).
-pub fn write_ktx2(format: BlockFormat, width: u32, height: u32, levels: &[Vec<u8>]) -> Vec<u8> {
-    assert!(width > 0 && height > 0 && !levels.is_empty());
+/// Writes a KTX2 file of `levels` (level 0 first, each `format.image_bytes` of its level size),
+/// supercompressed as `supercompression` says.
+pub fn write_ktx2(
+    format: BlockFormat,
+    width: u32,
+    height: u32,
+    levels: &[Vec<u8>],
+    supercompression: Supercompression,
+) -> Result<Vec<u8>, Ktx2Error> {
+    let max_levels = 32 - width.max(height).leading_zeros() as usize;
+    if width == 0 || height == 0 || levels.is_empty() || levels.len() > max_levels {
+        return Err(Ktx2Error::Write(format!(
+            "{} levels of a {width}×{height} texture",
+            levels.len()
+        )));
+    }
     for (l, data) in levels.iter().enumerate() {
         let (w, h) = level_size(width, height, l);
-        assert_eq!(data.len(), format.image_bytes(w, h), "level {l} size");
+        if data.len() != format.image_bytes(w, h) {
+            return Err(Ktx2Error::Write(format!(
+                "level {l} has {} bytes, {w}×{h} texels of {format:?} have {}",
+                data.len(),
+                format.image_bytes(w, h)
+            )));
+        }
     }
+    let stored: Vec<std::borrow::Cow<[u8]>> = match supercompression {
+        Supercompression::None => levels.iter().map(|l| l[..].into()).collect(),
+        Supercompression::Zstd => levels
+            .iter()
+            .map(|l| {
+                // with the frame's content checksum: damage inside the frame is caught by the
+                // decoder too, not only by the cell file's hash
+                let mut z = zstd::bulk::Compressor::new(ZSTD_LEVEL)?;
+                z.include_checksum(true)?;
+                z.compress(l).map(Into::into)
+            })
+            .collect::<std::io::Result<_>>()
+            .map_err(|e| Ktx2Error::Write(format!("Zstandard: {e}")))?,
+    };
     let n = levels.len();
     let dfd = dfd(format);
     let mut kvd = Vec::new();
@@ -125,14 +194,18 @@ pub fn write_ktx2(format: BlockFormat, width: u32, height: u32, levels: &[Vec<u8
     pad_to(&mut kvd, 4);
     let dfd_offset = HEADER_BYTES + n * LEVEL_INDEX_BYTES;
     let kvd_offset = dfd_offset + dfd.len();
-    let align = format.block_bytes().max(4); // lcm(8 or 16, 4)
-                                             // level data after the key/value data, smallest level first
+    // lcm(8 or 16, 4) without supercompression, 1 with (KTX 2.0 sec. 3.13)
+    let align = match supercompression {
+        Supercompression::None => format.block_bytes().max(4),
+        Supercompression::Zstd => 1,
+    };
+    // level data after the key/value data, smallest level first
     let mut offsets = vec![0usize; n];
     let mut end = kvd_offset + kvd.len();
     for l in (0..n).rev() {
         end = end.div_ceil(align) * align;
         offsets[l] = end;
-        end += levels[l].len();
+        end += stored[l].len();
     }
     let mut out = Vec::with_capacity(end);
     out.extend_from_slice(&IDENTIFIER);
@@ -145,7 +218,7 @@ pub fn write_ktx2(format: BlockFormat, width: u32, height: u32, levels: &[Vec<u8
         0, // layerCount: not an array
         1, // faceCount
         n as u32,
-        0, // supercompressionScheme: none
+        supercompression.scheme(),
     ] {
         out.extend_from_slice(&v.to_le_bytes());
     }
@@ -160,8 +233,8 @@ pub fn write_ktx2(format: BlockFormat, width: u32, height: u32, levels: &[Vec<u8
     out.extend_from_slice(&0u64.to_le_bytes()); // sgdByteOffset
     out.extend_from_slice(&0u64.to_le_bytes()); // sgdByteLength
     for l in 0..n {
-        let len = levels[l].len() as u64;
-        for v in [offsets[l] as u64, len, len] {
+        let (len, raw) = (stored[l].len() as u64, levels[l].len() as u64);
+        for v in [offsets[l] as u64, len, raw] {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
@@ -170,9 +243,9 @@ pub fn write_ktx2(format: BlockFormat, width: u32, height: u32, levels: &[Vec<u8
     for l in (0..n).rev() {
         pad_to(&mut out, align);
         debug_assert_eq!(out.len(), offsets[l]);
-        out.extend_from_slice(&levels[l]);
+        out.extend_from_slice(&stored[l]);
     }
-    out
+    Ok(out)
 }
 
 fn u32_at(b: &[u8], o: usize) -> u32 {
@@ -201,7 +274,8 @@ fn range(
 }
 
 /// Reads a KTX2 file written by [`write_ktx2`] (BC1 RGBA sRGB or BC7 sRGB, 2D, no
-/// supercompression), checking the identifier, header, index, data format descriptor and levels.
+/// supercompression or Zstandard), checking the identifier, header, index, data format descriptor
+/// and levels, and inflating Zstandard levels to exactly their size.
 pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
     if bytes.len() < IDENTIFIER.len() || bytes[..12] != IDENTIFIER {
         return Err(Ktx2Error::BadIdentifier);
@@ -226,7 +300,12 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
             "typeSize {type_size} (1 for block-compressed formats)"
         ));
     }
-    if width == 0 || height == 0 || depth != 0 || layers != 0 || faces != 1 {
+    if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
+        return bad(format!(
+            "a {width}×{height} texture (lemi stores sides of 1 to {MAX_SIDE} texels)"
+        ));
+    }
+    if depth != 0 || layers != 0 || faces != 1 {
         return bad(format!(
             "a {width}×{height}×{depth} texture of {layers} layers and {faces} faces (lemi stores 2D textures)"
         ));
@@ -237,11 +316,15 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
             "levelCount {level_count} for {width}×{height} (1 to {max_levels})"
         ));
     }
-    if scheme != 0 {
-        return bad(format!(
-            "supercompressionScheme {scheme} (block formats are stored without)"
-        ));
-    }
+    let supercompression = match scheme {
+        SCHEME_NONE => Supercompression::None,
+        SCHEME_ZSTD => Supercompression::Zstd,
+        _ => {
+            return bad(format!(
+                "supercompressionScheme {scheme} (lemi stores block formats with 0, none, or 2, Zstandard)"
+            ))
+        }
+    };
     let n = level_count as usize;
     let index_end = HEADER_BYTES + n * LEVEL_INDEX_BYTES;
     if bytes.len() < index_end {
@@ -282,7 +365,12 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
             dfd_bytes[14]
         )));
     }
-    if dfd_bytes[16..18] != [3, 3] || dfd_bytes[20] as usize != format.block_bytes() {
+    // bytesPlane0 is the block size; writers of supercompressed files may leave it 0 ("unsized",
+    // as KTX 2.0 asked before its errata)
+    let plane0 = dfd_bytes[20] as usize;
+    let plane0_ok = plane0 == format.block_bytes()
+        || (plane0 == 0 && supercompression != Supercompression::None);
+    if dfd_bytes[16..18] != [3, 3] || !plane0_ok {
         return Err(Ktx2Error::BadDfd(format!(
             "texel block {}×{} of {} bytes (expected 4×4 of {})",
             dfd_bytes[16] as u32 + 1,
@@ -295,10 +383,13 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
     range(bytes, kvd_off as u64, kvd_len as u64, "the key/value data")?;
     if sgd_len != 0 {
         return bad(format!(
-            "{sgd_len} bytes of supercompression global data without supercompression"
+            "{sgd_len} bytes of supercompression global data (none with scheme {scheme})"
         ));
     }
-    let align = format.block_bytes().max(4) as u64;
+    let align = match supercompression {
+        Supercompression::None => format.block_bytes().max(4) as u64,
+        Supercompression::Zstd => 1,
+    };
     let mut levels = Vec::with_capacity(n);
     for l in 0..n {
         let o = HEADER_BYTES + l * LEVEL_INDEX_BYTES;
@@ -310,7 +401,11 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
         let (w, h) = level_size(width, height, l);
         let want = format.image_bytes(w, h) as u64;
         let bad_level = |reason: String| Ktx2Error::BadLevel { level: l, reason };
-        if len != want || raw != want {
+        let len_ok = match supercompression {
+            Supercompression::None => len == want,
+            Supercompression::Zstd => len > 0,
+        };
+        if !len_ok || raw != want {
             return Err(bad_level(format!(
                 "{len} bytes ({raw} uncompressed) for {w}×{h} texels of {format:?} ({want} bytes)"
             )));
@@ -321,15 +416,38 @@ pub fn read_ktx2(bytes: &[u8]) -> Result<Ktx2Texture, Ktx2Error> {
             )));
         }
         let r = range(bytes, off, len, &format!("level {l}"))?;
-        levels.push(bytes[r].to_vec());
+        let data = match supercompression {
+            Supercompression::None => bytes[r].to_vec(),
+            Supercompression::Zstd => inflate_zstd(&bytes[r], want as usize)
+                .map_err(|e| bad_level(format!("Zstandard data: {e}")))?,
+        };
+        levels.push(data);
     }
     debug_assert!(levels.iter().all(|d| !d.is_empty()) && BLOCK == 4);
     Ok(Ktx2Texture {
         format,
         width,
         height,
+        supercompression,
         levels,
     })
+}
+
+/// Inflates Zstandard data to exactly `size` bytes; memory grows with what the data really
+/// inflates to (never beyond `size` + 1), not with what a damaged header claims.
+fn inflate_zstd(data: &[u8], size: usize) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut out = Vec::with_capacity(size.min(64 * data.len() + (1 << 16)));
+    zstd::stream::read::Decoder::with_buffer(data)
+        .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
+        .map_err(|e| e.to_string())?;
+    if out.len() != size {
+        return Err(format!(
+            "inflates to {} bytes, the level has {size}",
+            out.len()
+        ));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -357,6 +475,14 @@ mod tests {
             .collect()
     }
 
+    const SCHEMES: [(Supercompression, Option<ktx2::SupercompressionScheme>); 2] = [
+        (Supercompression::None, None),
+        (
+            Supercompression::Zstd,
+            Some(ktx2::SupercompressionScheme::Zstandard),
+        ),
+    ];
+
     #[test]
     fn the_ktx2_crate_reads_what_lemi_writes() {
         for (format, vk, model) in [
@@ -371,43 +497,135 @@ mod tests {
                 ktx2::ColorModel::BC1A,
             ),
         ] {
-            for (w, h, n) in [(64u32, 32u32, 1usize), (64, 32, 7), (256, 16, 3)] {
-                let lv = levels(format, w, h, n);
-                let file = write_ktx2(format, w, h, &lv);
-                let r = ktx2::Reader::new(&file[..]).expect("ktx2 crate reads the file");
-                let hd = r.header();
-                assert_eq!(hd.format, Some(vk));
-                assert_eq!((hd.pixel_width, hd.pixel_height, hd.pixel_depth), (w, h, 0));
-                assert_eq!((hd.face_count, hd.level_count), (1, n as u32));
-                assert_eq!(hd.supercompression_scheme, None);
-                assert_eq!(r.color_model(), Some(model));
-                assert_eq!(r.transfer_function(), Some(ktx2::TransferFunction::SRGB));
-                assert_eq!(r.is_alpha_premultiplied(), Some(false));
-                assert_eq!(r.writer(), Some("lemi\0")); // a NUL-terminated UTF-8 value
-                let got: Vec<&[u8]> = r.levels().map(|l| l.data).collect();
-                assert_eq!(got.len(), n);
-                for (a, b) in got.iter().zip(&lv) {
-                    assert_eq!(*a, &b[..]);
+            for (sc, scheme) in SCHEMES {
+                for (w, h, n) in [(64u32, 32u32, 1usize), (64, 32, 7), (256, 16, 3)] {
+                    let lv = levels(format, w, h, n);
+                    let file = write_ktx2(format, w, h, &lv, sc).unwrap();
+                    let r = ktx2::Reader::new(&file[..]).expect("ktx2 crate reads the file");
+                    let hd = r.header();
+                    assert_eq!(hd.format, Some(vk));
+                    assert_eq!((hd.pixel_width, hd.pixel_height, hd.pixel_depth), (w, h, 0));
+                    assert_eq!((hd.face_count, hd.level_count), (1, n as u32));
+                    assert_eq!(hd.supercompression_scheme, scheme);
+                    assert_eq!(r.color_model(), Some(model));
+                    assert_eq!(r.transfer_function(), Some(ktx2::TransferFunction::SRGB));
+                    assert_eq!(r.is_alpha_premultiplied(), Some(false));
+                    assert_eq!(r.writer(), Some("lemi\0")); // a NUL-terminated UTF-8 value
+                    let got: Vec<ktx2::Level> = r.levels().collect();
+                    assert_eq!(got.len(), n);
+                    for (a, b) in got.iter().zip(&lv) {
+                        assert_eq!(a.uncompressed_byte_length, b.len() as u64);
+                        // the stored level, inflated by the reference library's streaming API
+                        // (not the call lemi's reader makes)
+                        let raw = match sc {
+                            Supercompression::None => a.data.to_vec(),
+                            Supercompression::Zstd => zstd::decode_all(a.data).unwrap(),
+                        };
+                        assert_eq!(raw, *b);
+                    }
+                    // and lemi's own reader
+                    let t = read_ktx2(&file).unwrap();
+                    assert_eq!((t.format, t.width, t.height), (format, w, h));
+                    assert_eq!(t.supercompression, sc);
+                    assert_eq!(t.levels, lv);
+                    let dec = decode_blocks(format, w, h, &t.levels[0]).unwrap();
+                    assert_eq!(dec.len(), 4 * (w * h) as usize);
                 }
-                // and lemi's own reader
-                let t = read_ktx2(&file).unwrap();
-                assert_eq!((t.format, t.width, t.height), (format, w, h));
-                assert_eq!(t.levels, lv);
-                let dec = decode_blocks(format, w, h, &t.levels[0]).unwrap();
-                assert_eq!(dec.len(), 4 * (w * h) as usize);
             }
         }
     }
 
     #[test]
+    fn zstandard_makes_empty_texels_nearly_free() {
+        // a macro-texture's unused area is transparent, all blocks alike
+        let (w, h) = (256u32, 128u32);
+        let mut rgba = image(w, h);
+        rgba[4 * (w * h / 2) as usize..].fill(0);
+        let blocks = encode_blocks(BlockFormat::Bc1, w, h, &rgba).unwrap().0;
+        let plain = write_ktx2(
+            BlockFormat::Bc1,
+            w,
+            h,
+            std::slice::from_ref(&blocks),
+            Supercompression::None,
+        )
+        .unwrap();
+        let zstd = write_ktx2(BlockFormat::Bc1, w, h, &[blocks], Supercompression::Zstd).unwrap();
+        assert!(
+            zstd.len() < plain.len() / 2,
+            "{} {}",
+            zstd.len(),
+            plain.len()
+        );
+    }
+
+    #[test]
     fn every_truncation_is_an_error() {
-        let file = write_ktx2(BlockFormat::Bc1, 16, 8, &levels(BlockFormat::Bc1, 16, 8, 2));
-        for len in 0..file.len() {
-            assert!(
-                read_ktx2(&file[..len]).is_err(),
-                "{len} of {} bytes",
-                file.len()
-            );
+        for (sc, _) in SCHEMES {
+            let lv = levels(BlockFormat::Bc1, 16, 8, 2);
+            let file = write_ktx2(BlockFormat::Bc1, 16, 8, &lv, sc).unwrap();
+            for len in 0..file.len() {
+                assert!(
+                    read_ktx2(&file[..len]).is_err(),
+                    "{sc:?}: {len} of {} bytes",
+                    file.len()
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn damaged_zstandard_levels_are_clear_errors() {
+        let (w, h) = (64u32, 64u32);
+        let lv = levels(BlockFormat::Bc7, w, h, 1);
+        let file = write_ktx2(BlockFormat::Bc7, w, h, &lv, Supercompression::Zstd).unwrap();
+        let (off, len) = (u64_at(&file, 80) as usize, u64_at(&file, 88) as usize);
+        assert_eq!(off + len, file.len());
+        // every byte of the frame flipped in turn: an error naming the level (the frame carries
+        // a checksum of its content), or where a header bit does not matter the same blocks
+        for i in off..file.len() {
+            let mut f = file.clone();
+            f[i] ^= 0x5a;
+            match read_ktx2(&f) {
+                Err(Ktx2Error::BadLevel { level: 0, reason }) => {
+                    assert!(reason.contains("Zstandard"), "{reason}")
+                }
+                Err(e) => panic!("byte {i}: {e}"),
+                Ok(t) => assert_eq!(t.levels, lv, "byte {i}"),
+            }
+        }
+        // a frame that inflates to less or more than the level
+        let short = zstd::bulk::compress(&lv[0][..lv[0].len() - 16], 3).unwrap();
+        let long = zstd::bulk::compress(&[lv[0].clone(), vec![0; 16]].concat(), 3).unwrap();
+        for frame in [short, long] {
+            let mut f = file[..off].to_vec();
+            f.extend_from_slice(&frame);
+            f[88..96].copy_from_slice(&(frame.len() as u64).to_le_bytes());
+            let e = read_ktx2(&f).unwrap_err();
+            assert!(matches!(e, Ktx2Error::BadLevel { level: 0, .. }), "{e}");
+            assert!(e.to_string().contains("Zstandard"), "{e}");
+        }
+        // a huge size claimed by a damaged header is refused before anything is inflated
+        let mut f = file.clone();
+        f[20..24].copy_from_slice(&(1u32 << 20).to_le_bytes());
+        assert!(matches!(
+            read_ktx2(&f).unwrap_err(),
+            Ktx2Error::BadHeader(_)
+        ));
+        // an unknown scheme (3 is zlib) is named
+        let mut f = file.clone();
+        f[44..48].copy_from_slice(&3u32.to_le_bytes());
+        let e = read_ktx2(&f).unwrap_err();
+        assert!(e.to_string().contains("supercompressionScheme 3"), "{e}");
+    }
+
+    #[test]
+    fn the_writer_refuses_wrong_level_sizes() {
+        let lv = levels(BlockFormat::Bc1, 16, 8, 1);
+        for (sc, _) in SCHEMES {
+            assert!(write_ktx2(BlockFormat::Bc7, 16, 8, &lv, sc).is_err());
+            assert!(write_ktx2(BlockFormat::Bc1, 16, 16, &lv, sc).is_err());
+            assert!(write_ktx2(BlockFormat::Bc1, 16, 8, &[], sc).is_err());
         }
     }
 
@@ -418,7 +636,9 @@ mod tests {
             16,
             16,
             &levels(BlockFormat::Bc7, 16, 16, 1),
-        );
+            Supercompression::None,
+        )
+        .unwrap();
         let patch = |at: usize, v: u32| {
             let mut f = file.clone();
             f[at..at + 4].copy_from_slice(&v.to_le_bytes());
@@ -433,6 +653,7 @@ mod tests {
         assert!(matches!(patch(36, 6), Ktx2Error::BadHeader(_))); // faces
         assert!(matches!(patch(40, 9), Ktx2Error::BadHeader(_))); // levels beyond 16×16's
         assert!(matches!(patch(44, 1), Ktx2Error::BadHeader(_))); // BasisLZ
+        assert!(matches!(patch(44, 2), Ktx2Error::BadLevel { .. })); // Zstandard: not a frame
         assert!(matches!(patch(48, 1 << 30), Ktx2Error::Truncated(_))); // dfd offset
         assert!(matches!(
             patch(20, 32),

@@ -34,7 +34,7 @@ pub use gap_fill::{
     close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
 };
 pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
-pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture};
+pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture, Supercompression};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
     analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, BlockSharingStats,
