@@ -460,6 +460,16 @@ fn node_tools() -> Option<PathBuf> {
 }
 
 /// The validator's report per file.
+/// The codes of the validator's messages in one report of [`validate`].
+fn message_codes(report: &serde_json::Value) -> Vec<&str> {
+    report["messages"]
+        .as_array()
+        .expect("the validator report has messages")
+        .iter()
+        .filter_map(|m| m["code"].as_str())
+        .collect()
+}
+
 fn validate(web: &Path, files: &[PathBuf]) -> Vec<serde_json::Value> {
     let o = Command::new("node")
         .arg(web.join("tools/validate.mjs"))
@@ -511,13 +521,7 @@ fn every_exported_cell_passes_the_khronos_validator() {
     for r in validate(&web, &[plain.join("cells/0_0_0.glb")]) {
         assert_eq!(r["errors"], 0, "{r}");
         assert_eq!(r["warnings"], 0, "{r}");
-        let codes: Vec<&str> = r["messages"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter_map(|m| m["code"].as_str())
-            .collect();
-        assert!(!codes.contains(&"UNSUPPORTED_EXTENSION"), "{r}");
+        assert!(!message_codes(&r).contains(&"UNSUPPORTED_EXTENSION"), "{r}");
     }
     // KTX2 textures (a BC7 bundle's files through KHR_texture_basisu): no errors; the warnings
     // are the validator not knowing the extension, so not the KTX2 MIME type or image format
@@ -561,12 +565,7 @@ fn every_exported_cell_passes_the_khronos_validator() {
     std::fs::write(&broken_path, broken).unwrap();
     let r = &validate(&web, &[broken_path])[0];
     assert!(r["errors"].as_u64().unwrap() > 0, "{r}");
-    let codes: Vec<&str> = r["messages"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|m| m["code"].as_str())
-        .collect();
+    let codes = message_codes(r);
     assert!(
         codes.iter().any(|c| c.contains("ACCESSOR")),
         "the error names the accessor: {r}"

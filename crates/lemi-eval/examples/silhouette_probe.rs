@@ -15,9 +15,8 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::DVec3;
-use lemi_core::camera::Camera;
 use lemi_core::cell::{eval_directions, eval_viewpoints, CellId};
-use lemi_eval::{output_view, silhouettes, EvalOptions};
+use lemi_eval::{camera, output_view, silhouettes, EvalOptions};
 use lemi_gpu::{
     BackendChoice, Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
     RenderOptions, Renderer, UploadOptions,
@@ -51,19 +50,7 @@ struct Views {
 
 impl Probe {
     fn render(&self, eye: DVec3, dir: DVec3, k: u32) -> Result<Views> {
-        let (w, h) = (self.size.0 * k, self.size.1 * k);
-        let fov_y = 2.0
-            * ((0.5 * self.fov_x.to_radians()).tan() * h as f64 / w as f64)
-                .atan()
-                .to_degrees();
-        let up = if dir.normalize().y.abs() > 0.9 {
-            DVec3::Z
-        } else {
-            DVec3::Y
-        };
-        let view = Camera::new(eye, dir, up, fov_y, w, h)
-            .map_err(|e| anyhow!("camera: {e}"))?
-            .view();
+        let view = camera(eye, dir, self.fov_x, self.size.0 * k, self.size.1 * k)?.view();
         let options = RenderOptions::default();
         Ok(Views {
             reference: self.reference.render(&self.full, &view, &options)?,

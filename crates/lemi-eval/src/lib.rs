@@ -35,8 +35,8 @@ pub use report::{
     ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
 pub use run::{
-    evaluate_bundle, evaluate_with, output_view, CellRenderer, EvalOptions, EvalRun, RenderedView,
-    ViewpointSet,
+    camera, evaluate_bundle, evaluate_with, output_view, CellRenderer, EvalOptions, EvalRun,
+    RenderedView, ViewpointSet,
 };
 pub use stats::{Histogram, PixelErrorStats};
 pub use strategy_cells::{evaluate_strategy, StrategyCells};

@@ -112,8 +112,9 @@ pub fn output_view(manifest: &Manifest, options: &EvalOptions) -> (u32, u32, f64
     (w, h, fov)
 }
 
-/// A camera at `eye` looking along `dir` with horizontal fov `fov_x` (degrees).
-fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Camera, EvalError> {
+/// A camera at `eye` looking along `dir` with horizontal fov `fov_x` (degrees), as the
+/// evaluation places it.
+pub fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Camera, EvalError> {
     let fov_y = 2.0
         * ((0.5 * fov_x.to_radians()).tan() * h as f64 / w as f64)
             .atan()
