@@ -114,20 +114,31 @@ impl<'a> Baker<'a> {
         cell: &ViewCell,
         mut on_stage: impl FnMut(&Stage),
     ) -> Result<CellFile, BakeError> {
-        let mut seconds: Vec<(String, f64)> = Vec::new();
-        let center = cell.center;
-        let params = &self.recorder.params;
-        let res = params.resolution;
-
         on_stage(&Stage::Placement);
         let t = Instant::now();
         let plan = self.plan(cell)?;
+        let seconds = vec![("placement".to_string(), t.elapsed().as_secs_f64())];
+        self.bake_planned(cell, &plan, seconds, on_stage)
+    }
+
+    /// Bakes one cell whose layers are already planned (an environment-map cell's
+    /// [`Baker::plan`], or an object impostor's plan in its canonical frame,
+    /// `lemi_core::object_cell`); `seconds` holds the stages timed so far.
+    pub fn bake_planned(
+        &self,
+        cell: &ViewCell,
+        plan: &CellPlan,
+        mut seconds: Vec<(String, f64)>,
+        mut on_stage: impl FnMut(&Stage),
+    ) -> Result<CellFile, BakeError> {
+        let center = cell.center;
+        let params = &self.recorder.params;
+        let res = params.resolution;
         let near_field = plan.near_field;
-        seconds.push(("placement".into(), t.elapsed().as_secs_f64()));
 
         on_stage(&Stage::Classify);
         let t = Instant::now();
-        let class = self.recorder.classify(cell, &plan);
+        let class = self.recorder.classify(cell, plan);
         seconds.push(("classify".into(), t.elapsed().as_secs_f64()));
 
         if let Layering::Hlod {
@@ -137,7 +148,7 @@ impl<'a> Baker<'a> {
         {
             return self.bake_hlod(
                 cell,
-                &plan,
+                plan,
                 &class.near,
                 HlodOptions {
                     error_px,
@@ -178,7 +189,7 @@ impl<'a> Baker<'a> {
                     let t = Instant::now();
                     let rec = self.recorder.record_face(
                         cell,
-                        &plan,
+                        plan,
                         &class,
                         slot,
                         false,
@@ -312,7 +323,7 @@ impl<'a> Baker<'a> {
             block_bytes,
             seconds,
         };
-        let layers = layer_infos(&plan);
+        let layers = layer_infos(plan);
         Ok(CellFile {
             header: CellHeader {
                 cell: *cell,
@@ -327,6 +338,7 @@ impl<'a> Baker<'a> {
                 texture_format: format,
                 stats,
                 hlod: None,
+                object: None,
             },
             near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
             macro_blobs,
@@ -380,6 +392,7 @@ impl<'a> Baker<'a> {
                 macros: Vec::new(),
                 stats,
                 hlod: Some(hlod),
+                object: None,
                 texture_format: Default::default(),
             },
             near: near.iter().map(|r| [r.mesh, r.tri]).collect(),

@@ -42,6 +42,9 @@ pub enum BakeError {
     Params(#[from] ParamsError),
     #[error(transparent)]
     Layering(#[from] LayeringError),
+    /// An object impostor's view cell, object or placement is unusable.
+    #[error(transparent)]
+    Object(#[from] lemi_core::object_cell::ObjectError),
     #[error(transparent)]
     Record(Box<RecordError>),
     #[error("{what}: {source}")]
@@ -291,6 +294,7 @@ pub fn run(
                 params_hash: hash,
                 grid: job.grid.clone(),
                 cells: entries,
+                object: None,
             };
             manifest
                 .write(&job.bundle)
@@ -401,6 +405,7 @@ pub fn merge(bundle: &Path) -> Result<Manifest, BakeError> {
     let manifest = Manifest {
         format: MANIFEST_FORMAT.into(),
         version: version_for(&first.params),
+        object: None,
         generator: format!("lemi {}", env!("CARGO_PKG_VERSION")),
         scene: first.scene.clone(),
         params: first.params.clone(),

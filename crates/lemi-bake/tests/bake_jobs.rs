@@ -353,6 +353,7 @@ fn synthetic_cell(cell: &ViewCell, tag: u32) -> CellFile {
                 ..Default::default()
             },
             hlod: None,
+            object: None,
             texture_format: Default::default(),
         },
         near: vec![[0, tag], [1, 2]],
@@ -667,6 +668,7 @@ fn corrupt_or_truncated_files_give_clear_errors() {
         params_hash: params().hash(),
         grid: g.clone(),
         cells: Vec::new(),
+        object: None,
     };
     valid.write(&bundle).unwrap();
     assert_eq!(Manifest::read(&bundle).unwrap(), valid);

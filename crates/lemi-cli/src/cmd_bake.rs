@@ -123,7 +123,7 @@ pub struct Args {
 }
 
 /// `--texture-format NAME`.
-fn parse_texture_format(name: &str) -> std::result::Result<TextureFormat, String> {
+pub(crate) fn parse_texture_format(name: &str) -> std::result::Result<TextureFormat, String> {
     match name {
         "uastc" | "etc1s" => Err(format!(
             "{name} (Basis Universal) is not available in this lemi yet; use png, bc7 or bc1"
@@ -255,6 +255,50 @@ pub(crate) struct Prepared {
     pub load_seconds: f64,
 }
 
+/// α (radians) from `--alpha-deg`, or from the output view `--output-fov`/`--output-width`
+/// (its edge pixel; defaults 60°, 1280 px), with the output view it came from.
+pub(crate) fn alpha_of(
+    alpha_deg: Option<f64>,
+    output_fov: Option<f64>,
+    output_width: Option<u32>,
+) -> Result<(f64, Option<f64>, Option<u32>)> {
+    Ok(match alpha_deg {
+        Some(a) => {
+            if !(a.is_finite() && a > 0.0 && a < 20.0) {
+                bail!("--alpha-deg must be in (0, 20) degrees, got {a}");
+            }
+            (a.to_radians(), None, None)
+        }
+        None => {
+            let fov = output_fov.unwrap_or(DEFAULT_FOV_DEG);
+            let width = output_width.unwrap_or(DEFAULT_WIDTH);
+            if !(fov.is_finite() && fov > 0.0 && fov < 180.0) {
+                bail!("--output-fov must be in (0, 180) degrees, got {fov}");
+            }
+            let a = alpha_from_output_view(fov.to_radians(), width, PixelChoice::Edge)
+                .context("--output-fov/--output-width")?;
+            (a, Some(fov), Some(width))
+        }
+    })
+}
+
+/// The scene inputs as recorded in a bundle: files by absolute path (so the bundle can be
+/// rendered from anywhere), `builtin:` specs as given.
+pub(crate) fn absolute_sources(scenes: &[String]) -> Vec<String> {
+    scenes
+        .iter()
+        .map(|s| {
+            if s.starts_with("builtin:") {
+                s.clone()
+            } else {
+                std::fs::canonicalize(s)
+                    .map(|p| p.to_string_lossy().into_owned())
+                    .unwrap_or_else(|_| s.clone())
+            }
+        })
+        .collect()
+}
+
 /// Checks the flags, loads the scene and builds the job (`-o` is required).
 pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
     let Some(out) = args.out.clone() else {
@@ -276,24 +320,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         (Some(n), None) => LayerTarget::Layers(n),
         (None, None) => LayerTarget::Layers(64),
     };
-    let (alpha, fov, width) = match args.alpha_deg {
-        Some(a) => {
-            if !(a.is_finite() && a > 0.0 && a < 20.0) {
-                bail!("--alpha-deg must be in (0, 20) degrees, got {a}");
-            }
-            (a.to_radians(), None, None)
-        }
-        None => {
-            let fov = args.output_fov.unwrap_or(DEFAULT_FOV_DEG);
-            let width = args.output_width.unwrap_or(DEFAULT_WIDTH);
-            if !(fov.is_finite() && fov > 0.0 && fov < 180.0) {
-                bail!("--output-fov must be in (0, 180) degrees, got {fov}");
-            }
-            let a = alpha_from_output_view(fov.to_radians(), width, PixelChoice::Edge)
-                .context("--output-fov/--output-width")?;
-            (a, Some(fov), Some(width))
-        }
-    };
+    let (alpha, fov, width) = alpha_of(args.alpha_deg, args.output_fov, args.output_width)?;
     if matches!(layering, Layering::Hlod { .. }) && !args.texture_format.is_png() {
         bail!(
             "--texture-format {} does not apply to --strategy hlod (its far field is geometry, it \
@@ -332,20 +359,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         }
     }
 
-    // Files are recorded by absolute path, so the bundle can be rendered from anywhere.
-    let sources: Vec<String> = args
-        .scenes
-        .iter()
-        .map(|s| {
-            if s.starts_with("builtin:") {
-                s.clone()
-            } else {
-                std::fs::canonicalize(s)
-                    .map(|p| p.to_string_lossy().into_owned())
-                    .unwrap_or_else(|_| s.clone())
-            }
-        })
-        .collect();
+    let sources = absolute_sources(&args.scenes);
     let scene_args = SceneArgs {
         scenes: sources.clone(),
         up: args.up,

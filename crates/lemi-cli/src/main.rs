@@ -3,6 +3,7 @@
 
 mod bundle_view;
 mod cmd_bake;
+mod cmd_bake_object;
 mod cmd_compare;
 mod cmd_demo;
 mod cmd_eval;
@@ -33,6 +34,9 @@ enum Command {
     Demo(cmd_demo::Args),
     /// Bake view cells into a bundle of layered impostors (resumable, shardable).
     Bake(cmd_bake::Args),
+    /// Bake the layered impostor of one object for a box or shaft view cell (TR-186-2-02-04).
+    #[command(name = "bake-object")]
+    BakeObject(cmd_bake_object::Args),
     /// Measure a bundle's impostors against the geometry: the error certificate and report.
     Eval(cmd_eval::Args),
     /// Print triangle/material counts, bounds and import statistics of a scene.
@@ -59,6 +63,7 @@ fn main() {
         Command::Demo(a) => cmd_demo::run(a),
         Command::Info(a) => cmd_info::run(a),
         Command::Bake(a) => cmd_bake::run(a),
+        Command::BakeObject(a) => cmd_bake_object::run(a),
         Command::Eval(a) => cmd_eval::run(a),
         Command::Render(a) => cmd_render::run(a),
         Command::Layers(a) => cmd_layers::run(a),

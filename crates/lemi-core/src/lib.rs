@@ -17,6 +17,7 @@ pub mod face;
 pub mod frustum;
 pub mod hlod;
 pub mod layering;
+pub mod object_cell;
 pub mod parallax_error;
 pub mod placement;
 pub mod scene;

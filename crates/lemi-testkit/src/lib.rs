@@ -225,6 +225,7 @@ pub fn manifest_without_cells(params: BakeParams, grid: CellGrid, scene: SceneRe
         params,
         grid,
         cells: Vec::new(),
+        object: None,
     }
 }
 

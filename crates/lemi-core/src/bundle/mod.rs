@@ -14,6 +14,7 @@ use crate::compress::{
     decode_blocks, read_ktx2, BlockFormat, Ktx2Texture, MacroTexture, TextureFormat,
 };
 use crate::container::{self, Blob, ContainerError};
+use crate::object_cell::ObjectSetup;
 use crate::Face;
 
 mod params;
@@ -37,6 +38,13 @@ pub const BLOCK_BUNDLE_VERSION: u32 = 5;
 /// The first version of block-compressed bundles, still read: version 2 plus the cell header's
 /// `texture_format`, one KTX2 blob per macro-texture instead of a PNG.
 pub const BLOCK_BUNDLE_VERSION_4: u32 = 4;
+/// Version of the manifest and cell file of an object-impostor bundle (`lemi bake-object`,
+/// [`crate::object_cell`]): the manifest and the cell header carry the `object` section (view
+/// cell, object box, frame, TR placement inputs); the cell's blobs are laid out as version 5
+/// whatever the texture format, and its quads' corners are computed in the object's canonical
+/// frame and mapped to the world by that frame. Readers of versions 2 to 5 reject it by its
+/// version.
+pub const OBJECT_BUNDLE_VERSION: u32 = 6;
 
 /// The version a bundle baked with `params` is written with.
 pub fn version_for(params: &BakeParams) -> u32 {
@@ -178,6 +186,10 @@ pub struct Manifest {
     pub params_hash: String,
     pub grid: CellGrid,
     pub cells: Vec<CellEntry>,
+    /// An object-impostor bundle's setup ([`OBJECT_BUNDLE_VERSION`]): the one cell (id `0_0_0`)
+    /// serves viewpoints in `object.cell`, not in `grid` (a nominal one-cell grid).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<ObjectSetup>,
 }
 
 /// One layer of one face as baked.
@@ -340,6 +352,35 @@ pub struct CellHeader {
     /// `hlod.bin` blob.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub hlod: Option<HlodHeader>,
+    /// An object impostor's setup (version 6 only): the frame that maps the quads' canonical
+    /// corners to the world. `cell` is then the canonical cell (centred on the reference
+    /// viewpoint at the canonical origin) and `near.bin` lists every scene triangle drawn as
+    /// geometry in the cell: all but the object's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub object: Option<ObjectSetup>,
+}
+
+impl CellHeader {
+    /// The world corners of the quad covering texels `rect` of the layer of `face` at `distance`
+    /// (in [`Quad::corners`] order): the face's layer square around the cell's reference
+    /// viewpoint, or for an object cell the canonical square mapped by its frame. Every reader and
+    /// the bake compute them here, so the stored and the recomputed corners are the same numbers.
+    pub fn quad_corners(
+        &self,
+        face: Face,
+        distance: f64,
+        rect: crate::compress::TexelRect,
+    ) -> [[f32; 3]; 4] {
+        let center = self.cell.center;
+        crate::compress::quad_corners(face, distance, self.resolution, rect).map(|c| {
+            match &self.object {
+                Some(o) => o.frame.to_world(c),
+                None => center + c,
+            }
+            .as_vec3()
+            .to_array()
+        })
+    }
 }
 
 /// The simplified far field of a cell (`lemi_core::hlod::HlodFarField` as stored).
@@ -476,6 +517,10 @@ pub enum BundleErrorKind {
         cell_size: f64,
         counts: [i32; 3],
     },
+    /// A point outside an object impostor's view cell (`path` is the bundle directory): the
+    /// object is drawn as geometry there, never as its impostor.
+    #[error("({:.2}, {:.2}, {:.2}) is outside the object impostor's view cell {cell}", point[0], point[1], point[2])]
+    OutsideObjectCell { point: [f64; 3], cell: String },
     #[error("is {actual} bytes, the bundle records {expected} (changed or damaged after baking); bake it again")]
     Size { actual: u64, expected: u64 },
     #[error("does not match the BLAKE3 hash the bundle records for it (changed or damaged after baking); bake it again")]
@@ -504,7 +549,9 @@ impl BundleErrorKind {
     pub fn is_damage(&self) -> bool {
         !matches!(
             self,
-            BundleErrorKind::NotBaked { .. } | BundleErrorKind::OutsideGrid { .. }
+            BundleErrorKind::NotBaked { .. }
+                | BundleErrorKind::OutsideGrid { .. }
+                | BundleErrorKind::OutsideObjectCell { .. }
         )
     }
 }
@@ -558,13 +605,28 @@ impl Manifest {
                 format!("format is `{}`, expected `{MANIFEST_FORMAT}`", m.format),
             ));
         }
+        if let Some(object) = &m.object {
+            if m.version != OBJECT_BUNDLE_VERSION {
+                return Err(BundleError::invalid(
+                    path,
+                    format!(
+                        "an `object` section in a version {} manifest (object bundles are version {OBJECT_BUNDLE_VERSION})",
+                        m.version
+                    ),
+                ));
+            }
+            if let Err(e) = object.frame.validate() {
+                return Err(BundleError::invalid(path, format!("object: {e}")));
+            }
+            return Ok(m);
+        }
         let block_4 =
             m.version == BLOCK_BUNDLE_VERSION_4 && version_for(&m.params) == BLOCK_BUNDLE_VERSION;
         if m.version != version_for(&m.params) && !block_4 {
             return Err(BundleError::invalid(
                 path,
                 format!(
-                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, {HLOD_BUNDLE_VERSION} for HLOD bundles and {BLOCK_BUNDLE_VERSION_4} or {BLOCK_BUNDLE_VERSION} for block-compressed textures, each with the parameters that call for it)",
+                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, {HLOD_BUNDLE_VERSION} for HLOD bundles, {BLOCK_BUNDLE_VERSION_4} or {BLOCK_BUNDLE_VERSION} for block-compressed textures and {OBJECT_BUNDLE_VERSION} for object impostors, each with the parameters that call for it)",
                     m.version
                 ),
             ));
@@ -659,8 +721,11 @@ pub struct CellFile {
 
 impl CellFile {
     pub fn encode(&self) -> Result<Vec<u8>, ContainerError> {
+        if self.header.object.is_some() {
+            return self.encode_v5(OBJECT_BUNDLE_VERSION);
+        }
         if self.header.hlod.is_none() && self.header.texture_format.block().is_some() {
-            return self.encode_v5();
+            return self.encode_v5(BLOCK_BUNDLE_VERSION);
         }
         let mut blobs = Vec::with_capacity(2 + self.macro_blobs.len());
         blobs.push(Blob {
@@ -692,8 +757,8 @@ impl CellFile {
 
     /// A block-compressed cell as version 5: `near.bin`, `quads.bin` ([`encode_quad_columns`]),
     /// `layers.bin` (the header's `layers`, which the JSON header then leaves empty), then the
-    /// macro-textures.
-    fn encode_v5(&self) -> Result<Vec<u8>, ContainerError> {
+    /// macro-textures. Object cells use the same layout as `version` 6.
+    fn encode_v5(&self, version: u32) -> Result<Vec<u8>, ContainerError> {
         let mut blobs = Vec::with_capacity(3 + self.macro_blobs.len());
         blobs.push(Blob {
             name: "near.bin".into(),
@@ -718,7 +783,7 @@ impl CellFile {
             quads: Vec::new(),
             ..self.header.clone()
         };
-        container::encode(CELL_MAGIC, BLOCK_BUNDLE_VERSION, &header, &blobs)
+        container::encode(CELL_MAGIC, version, &header, &blobs)
     }
 
     pub fn decode(bytes: &[u8]) -> Result<CellFile, ContainerError> {
@@ -726,10 +791,26 @@ impl CellFile {
             container::decode_versions(
                 CELL_MAGIC,
                 "cell",
-                BUNDLE_VERSION..=BLOCK_BUNDLE_VERSION,
+                BUNDLE_VERSION..=OBJECT_BUNDLE_VERSION,
                 bytes,
             )?;
-        let v5 = version == BLOCK_BUNDLE_VERSION;
+        let v5 = version >= BLOCK_BUNDLE_VERSION;
+        match (version, &header.object) {
+            (OBJECT_BUNDLE_VERSION, Some(o)) => {
+                o.frame.validate().map_err(ContainerError::Header)?;
+            }
+            (OBJECT_BUNDLE_VERSION, None) => {
+                return Err(ContainerError::Header(
+                    "a version 6 cell without its `object` section".into(),
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(ContainerError::Header(format!(
+                    "an `object` section in a version {version} cell (object cells are version {OBJECT_BUNDLE_VERSION})"
+                )))
+            }
+            _ => {}
+        }
         let mut it = blobs.into_iter();
         let near_blob = it
             .next()
@@ -797,6 +878,7 @@ impl CellFile {
             _ => {}
         }
         match (version, header.texture_format.block()) {
+            (OBJECT_BUNDLE_VERSION, _) => {}
             (BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION, Some(_)) => {}
             (BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION, None) => {
                 return Err(ContainerError::Header(format!(
@@ -1156,7 +1238,6 @@ fn decode_quad_records(raw: &[u8], header: &CellHeader) -> Result<Vec<Quad>, Con
     }
     let res = header.resolution;
     let u16_at = |r: &[u8], i: usize| u16::from_le_bytes([r[i], r[i + 1]]);
-    let center = header.cell.center;
     raw.chunks_exact(QUAD_RECORD_BYTES)
         .enumerate()
         .map(|(i, r)| {
@@ -1186,8 +1267,7 @@ fn decode_quad_records(raw: &[u8], header: &CellHeader) -> Result<Vec<Quad>, Con
                 .map(|l| l.distance)
                 .ok_or_else(|| bad(format!("quad {i}: face {face} has no layer {layer}")))?;
             let rect = crate::compress::TexelRect { x0, y0, x1, y1 };
-            let corners = crate::compress::quad_corners(face, distance, res, rect)
-                .map(|c| (center + c).as_vec3().to_array());
+            let corners = header.quad_corners(face, distance, rect);
             if corners.iter().flatten().any(|c| !c.is_finite()) {
                 return Err(bad(format!("quad {i}: non-finite corners")));
             }
@@ -1359,6 +1439,7 @@ mod tests {
                 }],
                 stats: CellStats::default(),
                 hlod: None,
+                object: None,
                 texture_format: Default::default(),
             },
             near: vec![[0, 1], [2, 3]],

@@ -206,8 +206,23 @@ impl Bundle {
     }
 
     /// The grid cell containing `point` (half-open on the upper side), whether baked or not.
+    /// For an object bundle: its one cell if `point` lies in the object's view cell.
     pub fn locate(&self, point: DVec3) -> Result<ViewCell, BundleError> {
         let grid = &self.manifest.grid;
+        if let Some(o) = &self.manifest.object {
+            let cell = grid
+                .cell(glam::IVec3::ZERO)
+                .filter(|_| o.cell.contains(point));
+            return cell.ok_or_else(|| {
+                BundleError::new(
+                    &self.dir,
+                    BundleErrorKind::OutsideObjectCell {
+                        point: point.to_array(),
+                        cell: o.cell.describe(),
+                    },
+                )
+            });
+        }
         grid.locate(point).ok_or_else(|| {
             BundleError::new(
                 &self.dir,
@@ -303,6 +318,7 @@ mod tests {
                 bytes: bytes.len() as u64,
                 blake3: blake3::hash(&bytes).to_hex().to_string(),
             }],
+            object: None,
         };
         manifest.write(&dir).unwrap();
         (dir, manifest, file)

@@ -1,0 +1,725 @@
+//! Object impostors: one object (a landmark, a statue, the street behind a portal) seen from a box-
+//! or shaft-shaped view cell, its layers placed by the TR's object placement
+//! ([`crate::placement::object`]) and recorded by the same crack-free pipeline as the cube layers
+//! of an environment-map cell.
+//!
+//! This work is based on: S. Jeschke, M. Wimmer, *An Error Metric for Layered Environment Map
+//! Impostors*, TR-186-2-02-04, sec. 2.1.1 (the impostor frustum fits the object's near face seen
+//! from the reference viewpoint, which lies `s` behind the cell border nearest the object, centred
+//! across the view axis), sec. 3 (portal impostors; Rafferty et al. 1998).
+//!
+//! **The object frame.** The TR's layers are planes across the view axis at distances `t + s`
+//! from the reference viewpoint, seen through a frustum of half-angle tangents `kx`, `ky`. The
+//! affine map [`ObjectFrame::to_canonical`] takes the world to the frame of cube face `+Z`: the
+//! reference viewpoint to the origin, the view axis to `+Z` (depths unchanged), the impostor's
+//! right and down directions to `+X` and `−Y`, divided by `kx` and `ky`. The frustum becomes the
+//! face's 90° pyramid and every layer a square `|s|, |t| ≤ 1` of that face at the layer's depth,
+//! so placement, slab classification, clipping to slabs (planes map to planes), conservative
+//! recording, compression and the quad records are the environment map's, unchanged; a quad's
+//! corners go back to the world with [`ObjectFrame::to_world`] (a rectangle across the axis stays a
+//! rectangle: the map only scales the quad's own two directions). Normals are not mapped: shading
+//! sees the world's normals and light.
+//!
+//! **Which axis.** For a box cell the view axis is the coordinate axis along which the object
+//! lies wholly beyond the cell (the largest gap if several); the reference viewpoint is centred
+//! on the cell's cross-section and the frustum is symmetric about the axis, wide enough for every
+//! corner of the object's box (an object off the axis gets a wider frustum, never a clipped one).
+//! For a shaft the axis is the shaft's own, pointing from the viewer to the apex.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::cell::ViewCell;
+use crate::classify::Slabs;
+use crate::layering::{CellPlan, FacePlan};
+use crate::placement::{
+    place_object_layers, schaufler_res, EnvParams, Layer, ObjectCell, ObjectParams,
+    ObjectPlacement, Placement,
+};
+use crate::{Aabb, Face};
+
+/// Why an object impostor cannot be set up; the message says which input is wrong and why (the
+/// command line adds the flag's name).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ObjectError {
+    /// The view cell specification is malformed or degenerate.
+    #[error("view cell: {0}")]
+    ViewCell(String),
+    /// The object (its box or its triangles) is unusable.
+    #[error("object: {0}")]
+    Object(String),
+    /// The object and the view cell overlap, or the object is not in front of the cell.
+    #[error("the object is not outside the view cell: {0}")]
+    Overlap(String),
+    /// The placement refused the resulting parameters.
+    #[error("placing the object's layers: {0}")]
+    Placement(#[from] crate::placement::PlacementError),
+}
+
+/// The region a viewer of an object impostor may occupy (TR Fig. 2).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum ObjectViewCell {
+    /// An axis-aligned box.
+    Box { min: DVec3, max: DVec3 },
+    /// A square shaft with its apex at `apex` opening along the unit direction `dir` (from the
+    /// apex toward the viewer) with full apex angle `angle_deg` in both directions across it; the
+    /// cell is the part of the shaft at least `min_distance` from the apex along `dir`, unbounded
+    /// away from the apex.
+    Shaft {
+        apex: DVec3,
+        dir: DVec3,
+        angle_deg: f64,
+        min_distance: f64,
+    },
+}
+
+/// The right and down directions of a view axis `forward` (unit): down is the world's −Y made
+/// orthogonal to `forward` (−Z when looking straight up or down), right = forward × down, the
+/// handedness of the cube faces ([`Face`]).
+fn basis(forward: DVec3) -> (DVec3, DVec3) {
+    let up = if forward.y.abs() > 0.9 {
+        DVec3::Z * forward.y.signum()
+    } else {
+        DVec3::Y
+    };
+    let down = (forward * up.dot(forward) - up).normalize();
+    (forward.cross(down), down)
+}
+
+fn numbers(body: &str, n: usize, what: &str) -> Result<Vec<f64>, String> {
+    let v: Vec<f64> = body
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("`{body}`: {e} (expected {what})"))?;
+    if v.len() != n {
+        return Err(format!(
+            "`{body}`: {} numbers, expected {n}: {what}",
+            v.len()
+        ));
+    }
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(format!("`{body}`: every number must be finite ({what})"));
+    }
+    Ok(v)
+}
+
+impl ObjectViewCell {
+    /// Parses `box:x0,y0,z0,x1,y1,z1` or `shaft:ax,ay,az,dx,dy,dz,angle_deg,min_distance` and
+    /// checks it ([`ObjectViewCell::validate`]).
+    pub fn parse(spec: &str) -> Result<ObjectViewCell, ObjectError> {
+        let bad = |m: String| ObjectError::ViewCell(m);
+        let (kind, body) = spec.split_once(':').ok_or_else(|| {
+            bad(format!(
+                "`{spec}`: expected box:x0,y0,z0,x1,y1,z1 or shaft:ax,ay,az,dx,dy,dz,angle_deg,min_distance"
+            ))
+        })?;
+        let cell = match kind.trim().to_ascii_lowercase().as_str() {
+            "box" => {
+                let v =
+                    numbers(body, 6, "the two opposite corners x0,y0,z0,x1,y1,z1").map_err(bad)?;
+                let (a, b) = (DVec3::new(v[0], v[1], v[2]), DVec3::new(v[3], v[4], v[5]));
+                ObjectViewCell::Box {
+                    min: a.min(b),
+                    max: a.max(b),
+                }
+            }
+            "shaft" => {
+                let v = numbers(
+                    body,
+                    8,
+                    "apex ax,ay,az, direction dx,dy,dz toward the viewer, apex angle in degrees, distance of the cell from the apex",
+                )
+                .map_err(bad)?;
+                let dir = DVec3::new(v[3], v[4], v[5]);
+                ObjectViewCell::Shaft {
+                    apex: DVec3::new(v[0], v[1], v[2]),
+                    dir: if dir.length() > 0.0 {
+                        dir.normalize()
+                    } else {
+                        dir
+                    },
+                    angle_deg: v[6],
+                    min_distance: v[7],
+                }
+            }
+            k => return Err(bad(format!("`{k}` is not a view-cell kind (box or shaft)"))),
+        };
+        cell.validate()?;
+        Ok(cell)
+    }
+
+    /// Checks the cell: a box with positive size along every axis; a shaft with a finite apex, a
+    /// non-zero direction, an apex angle strictly between 0° and 180° and a positive distance.
+    pub fn validate(&self) -> Result<(), ObjectError> {
+        let bad = |m: String| Err(ObjectError::ViewCell(m));
+        match *self {
+            ObjectViewCell::Box { min, max } => {
+                if !min.is_finite() || !max.is_finite() {
+                    return bad("the box's corners must be finite".into());
+                }
+                let size = max - min;
+                if size.min_element() <= 0.0 {
+                    return bad(format!(
+                        "the box {:?} to {:?} is empty (size {:?}); it needs a positive size along x, y and z",
+                        min.to_array(),
+                        max.to_array(),
+                        size.to_array()
+                    ));
+                }
+            }
+            ObjectViewCell::Shaft {
+                apex,
+                dir,
+                angle_deg,
+                min_distance,
+            } => {
+                if !apex.is_finite() {
+                    return bad("the shaft's apex must be finite".into());
+                }
+                if !dir.is_finite() || (dir.length() - 1.0).abs() > 1e-9 {
+                    return bad("the shaft's direction must be a non-zero vector".into());
+                }
+                if !(angle_deg.is_finite() && angle_deg > 0.0 && angle_deg < 180.0) {
+                    return bad(format!(
+                        "the shaft's apex angle {angle_deg}° must be more than 0° and less than 180°"
+                    ));
+                }
+                if !(min_distance.is_finite() && min_distance > 0.0) {
+                    return bad(format!(
+                        "the cell's distance from the apex {min_distance} must be positive"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The cell as the flag that gives it (`box:…` or `shaft:…`).
+    pub fn describe(&self) -> String {
+        let v = |p: DVec3| format!("{},{},{}", p.x, p.y, p.z);
+        match *self {
+            ObjectViewCell::Box { min, max } => format!("box:{},{}", v(min), v(max)),
+            ObjectViewCell::Shaft {
+                apex,
+                dir,
+                angle_deg,
+                min_distance,
+            } => format!("shaft:{},{},{angle_deg},{min_distance}", v(apex), v(dir)),
+        }
+    }
+
+    /// Whether the viewpoint `p` lies in the cell (borders included).
+    pub fn contains(&self, p: DVec3) -> bool {
+        match *self {
+            ObjectViewCell::Box { min, max } => Aabb::new(min, max).contains(p),
+            ObjectViewCell::Shaft {
+                apex,
+                dir,
+                angle_deg,
+                min_distance,
+            } => {
+                let r = p - apex;
+                let along = r.dot(dir);
+                if along.is_nan() || along < min_distance {
+                    return false;
+                }
+                let (right, down) = basis(-dir);
+                let reach = along * (0.5 * angle_deg.to_radians()).tan();
+                r.dot(right).abs() <= reach && r.dot(down).abs() <= reach
+            }
+        }
+    }
+
+    /// Viewpoints at which the impostor is judged, each with a label: for a box the centre, the 8
+    /// corners, the 6 face and 12 edge midpoints and `random` interior points
+    /// ([`crate::cell::eval_viewpoints`]); for a shaft the corners, edge midpoints and centre of
+    /// its near border and of cross-sections 1, 4 and 16 near-border widths farther back (where
+    /// the TR's near-border assumption fails, see [`crate::placement::object::shaft_reach`]) and
+    /// `random` points between the near border and the farthest of those, all nudged 10⁻⁹ of
+    /// their distance inside.
+    pub fn eval_viewpoints(&self, random: usize, seed: u64) -> Vec<(String, DVec3)> {
+        match *self {
+            ObjectViewCell::Box { min, max } => {
+                let cell = ViewCell {
+                    index: glam::IVec3::ZERO,
+                    center: 0.5 * (min + max),
+                    half: 0.5 * (max - min),
+                };
+                crate::cell::eval_viewpoints(&cell, random, seed)
+            }
+            ObjectViewCell::Shaft {
+                apex,
+                dir,
+                angle_deg,
+                min_distance,
+            } => {
+                let (right, down) = basis(-dir);
+                let tan = (0.5 * angle_deg.to_radians()).tan() * (1.0 - 1e-9);
+                let near_width = 2.0 * min_distance * tan;
+                let at = |along: f64, u: f64, v: f64| {
+                    apex + dir * along + (right * u + down * v) * (along * tan)
+                };
+                let mut out = Vec::new();
+                let near = min_distance * (1.0 + 1e-9);
+                for (name, back) in [
+                    ("near border", 0.0),
+                    ("1 width back", 1.0),
+                    ("4 widths back", 4.0),
+                    ("16 widths back", 16.0),
+                ] {
+                    let along = near + back * near_width;
+                    out.push((format!("{name} centre"), at(along, 0.0, 0.0)));
+                    for (k, (u, v)) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                        .into_iter()
+                        .enumerate()
+                    {
+                        out.push((format!("{name} corner {k}"), at(along, u, v)));
+                    }
+                    for (k, (u, v)) in [(0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)]
+                        .into_iter()
+                        .enumerate()
+                    {
+                        out.push((format!("{name} edge {k}"), at(along, u, v)));
+                    }
+                }
+                let mut x = seed ^ 0x9e37_79b9_7f4a_7c15;
+                let mut next = move || {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    (x >> 11) as f64 / (1u64 << 53) as f64
+                };
+                for k in 0..random {
+                    let along = near + 16.0 * near_width * next();
+                    let (u, v) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
+                    out.push((format!("random {k}"), at(along, u, v)));
+                }
+                out
+            }
+        }
+    }
+}
+
+/// The affine map between the world and the canonical frame of an object impostor (see the
+/// module docs): `origin` is the reference viewpoint, `forward` the view axis, `right`/`down` the
+/// impostor's column and row directions, `tan` the frustum's half-angle tangents across them.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectFrame {
+    pub origin: DVec3,
+    pub forward: DVec3,
+    pub right: DVec3,
+    pub down: DVec3,
+    pub tan: [f64; 2],
+}
+
+impl ObjectFrame {
+    /// The canonical point of the world point `p` (face `+Z`: right `+X`, down `−Y`).
+    pub fn to_canonical(&self, p: DVec3) -> DVec3 {
+        let r = p - self.origin;
+        DVec3::new(
+            r.dot(self.right) / self.tan[0],
+            -r.dot(self.down) / self.tan[1],
+            r.dot(self.forward),
+        )
+    }
+
+    /// The world point of the canonical point `c` (inverse of [`ObjectFrame::to_canonical`]).
+    pub fn to_world(&self, c: DVec3) -> DVec3 {
+        self.origin + self.right * (c.x * self.tan[0]) - self.down * (c.y * self.tan[1])
+            + self.forward * c.z
+    }
+
+    /// Checks that the frame is a usable map (finite, orthonormal axes, positive tangents): a
+    /// damaged file must not produce NaN corners.
+    pub fn validate(&self) -> Result<(), String> {
+        let axes = [self.forward, self.right, self.down];
+        if !self.origin.is_finite() || axes.iter().any(|a| !a.is_finite()) {
+            return Err("the object frame is not finite".into());
+        }
+        for (i, a) in axes.iter().enumerate() {
+            if (a.length() - 1.0).abs() > 1e-6 {
+                return Err(format!("object frame axis {i} is not a unit vector"));
+            }
+            for b in &axes[i + 1..] {
+                if a.dot(*b).abs() > 1e-6 {
+                    return Err("the object frame's axes are not orthogonal".into());
+                }
+            }
+        }
+        if !self.tan.iter().all(|t| t.is_finite() && *t > 0.0) {
+            return Err("the object frame's frustum tangents must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// An object impostor's setup: the view cell, the object's box, the frame and the TR's placement
+/// inputs ([`ObjectParams`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ObjectSetup {
+    pub cell: ObjectViewCell,
+    /// The object's bounding box (world).
+    pub object: Aabb,
+    pub frame: ObjectFrame,
+    pub params: ObjectParams,
+}
+
+/// Depth of the frustum's near plane in front of the object's near side, relative, so that no
+/// triangle of the object is classified into the near field by rounding.
+const NEAR_SLACK: f64 = 1e-6;
+/// Relative widening of the frustum beyond the object's outermost corner (rounding).
+const FRUSTUM_SLACK: f64 = 1e-6;
+
+impl ObjectSetup {
+    /// Sets up the impostor of the object whose box is `object` for `cell`, with `alpha` the
+    /// allowed parallax angle and `res` the texels across the impostor (`None`: Schaufler's
+    /// rule, [`schaufler_res`], for the object's near face seen from the cell's nearest point).
+    pub fn new(
+        cell: ObjectViewCell,
+        object: Aabb,
+        res: Option<u32>,
+        alpha: f64,
+    ) -> Result<ObjectSetup, ObjectError> {
+        cell.validate()?;
+        if object.is_empty() || !object.min.is_finite() || !object.max.is_finite() {
+            return Err(ObjectError::Object(
+                "it has no finite extent (no triangles selected?)".into(),
+            ));
+        }
+        let corners = box_corners(&object);
+        // the axis, the reference viewpoint (s behind the near border) and the TR's cell
+        let (forward, near_border_point, s_of, tr_cell) = match cell {
+            ObjectViewCell::Box { min, max } => {
+                // the axis along which the object lies wholly beyond the cell, largest gap first
+                let mut best: Option<(f64, DVec3)> = None;
+                for a in 0..3 {
+                    let e = DVec3::AXES[a];
+                    for (gap, dir) in [(object.min[a] - max[a], e), (min[a] - object.max[a], -e)] {
+                        if gap > 0.0 && best.is_none_or(|(g, _)| gap > g) {
+                            best = Some((gap, dir));
+                        }
+                    }
+                }
+                let Some((_, forward)) = best else {
+                    return Err(ObjectError::Overlap(format!(
+                        "the object's box {:?} to {:?} overlaps the view cell {:?} to {:?} along every axis; an object impostor needs the object wholly beyond one side of the cell",
+                        object.min.to_array(),
+                        object.max.to_array(),
+                        min.to_array(),
+                        max.to_array()
+                    )));
+                };
+                let (right, down) = basis(forward);
+                let size = max - min;
+                let width = [size.dot(right).abs(), size.dot(down).abs()];
+                let depth = size.dot(forward).abs();
+                let centre = 0.5 * (min + max);
+                let near_border = centre + forward * (0.5 * depth);
+                let obj_size = object.size();
+                let obj_w = [obj_size.dot(right).abs(), obj_size.dot(down).abs()];
+                let tr = ObjectCell::Box { width, depth };
+                let s = tr.recommended_s(obj_w);
+                (forward, near_border, s, tr)
+            }
+            ObjectViewCell::Shaft {
+                apex,
+                dir,
+                angle_deg,
+                min_distance,
+            } => {
+                let tr = ObjectCell::Shaft {
+                    apex_angle: angle_deg.to_radians(),
+                    apex_distance: min_distance,
+                };
+                let s = tr.recommended_s([0.0, 0.0]);
+                (-dir, apex + dir * min_distance, s, tr)
+            }
+        };
+        let (right, down) = basis(forward);
+        let origin = near_border_point - forward * s_of;
+        let depths: Vec<f64> = corners.iter().map(|c| (*c - origin).dot(forward)).collect();
+        let near = depths.iter().copied().fold(f64::INFINITY, f64::min);
+        let far = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let t0 = near - s_of;
+        if t0.is_nan() || t0 <= 0.0 {
+            return Err(ObjectError::Overlap(format!(
+                "the object's box {:?} to {:?} reaches {:.3} m into the view cell (its nearest point must lie beyond the cell's border nearest it)",
+                object.min.to_array(),
+                object.max.to_array(),
+                -t0
+            )));
+        }
+        // the symmetric frustum through the reference viewpoint holding every corner
+        let mut tan = [0.0f64; 2];
+        for c in &corners {
+            let r = *c - origin;
+            let d = r.dot(forward);
+            tan[0] = tan[0].max(r.dot(right).abs() / d);
+            tan[1] = tan[1].max(r.dot(down).abs() / d);
+        }
+        // a flat object (a facade seen edge-on) still needs a frustum with some width
+        let floor = 1e-6 * (tan[0].max(tan[1])).max(1e-9);
+        let tan = tan.map(|t| t.max(floor) * (1.0 + FRUSTUM_SLACK));
+        let size = tan.map(|t| 2.0 * (t0 + s_of) * t);
+        let res = match res {
+            Some(r) => r,
+            None => schaufler_res(size[0].max(size[1]), t0, alpha)?,
+        };
+        let params = ObjectParams {
+            cell: tr_cell,
+            s: s_of,
+            t0,
+            depth: far - near,
+            size,
+            res,
+            alpha,
+        };
+        params.validate()?;
+        Ok(ObjectSetup {
+            cell,
+            object,
+            frame: ObjectFrame {
+                origin,
+                forward,
+                right,
+                down,
+                tan,
+            },
+            params,
+        })
+    }
+
+    /// The TR's layers for this setup (near to far, TR coordinates).
+    pub fn place(&self) -> Result<ObjectPlacement, ObjectError> {
+        Ok(place_object_layers(&self.params)?)
+    }
+
+    /// The canonical view cell the bake records from: centred on the reference viewpoint (the
+    /// canonical origin), with the cell's half widths across and `s` along the axis (only its
+    /// centre enters the recording: there is no near geometry to seam).
+    pub fn canonical_cell(&self) -> ViewCell {
+        let n = self.params.cell.near_width();
+        ViewCell {
+            index: glam::IVec3::ZERO,
+            center: DVec3::ZERO,
+            half: DVec3::new(0.5 * n[0], 0.5 * n[1], self.params.s.max(1e-9)),
+        }
+    }
+
+    /// The recording plan of `placement` in the canonical frame: one face (`+Z`), its layers far
+    /// to near at depths `t + s` from the reference viewpoint, each recording its slab between the
+    /// TR's borders (the nearest from just in front of the object, the farthest unbounded), and a
+    /// near field just in front of the object (it holds nothing of the object).
+    pub fn plan(&self, placement: &ObjectPlacement) -> CellPlan {
+        let s = self.params.s;
+        let near_field = (self.params.t0 + s) * (1.0 - NEAR_SLACK);
+        let n = placement.layers.len();
+        let layers: Vec<Layer> = placement
+            .layers
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(k, l)| Layer {
+                distance: l.distance + s,
+                near_border: if k == 0 {
+                    near_field
+                } else {
+                    l.near_border + s
+                },
+                far_border: if k + 1 == n {
+                    f64::INFINITY
+                } else {
+                    l.far_border + s
+                },
+                bound_by: l.bound_by,
+            })
+            .collect();
+        let borders: Vec<f64> = layers.iter().map(|l| l.near_border).collect();
+        let half = self.params.cell.near_width();
+        CellPlan {
+            faces: vec![FacePlan {
+                face: Face::PosZ,
+                placement: Placement {
+                    layers,
+                    near_field,
+                    params: EnvParams {
+                        along: s,
+                        across: [0.5 * half[0], 0.5 * half[1]],
+                        res: self.params.res,
+                        alpha: self.params.alpha,
+                    },
+                },
+                slabs: Slabs::from_borders(&borders),
+            }],
+            near_field,
+        }
+    }
+
+    /// A point to look at from the cell: the centre of the object's box.
+    pub fn object_centre(&self) -> DVec3 {
+        self.object.center()
+    }
+}
+
+/// The 8 corners of a box.
+pub fn box_corners(b: &Aabb) -> [DVec3; 8] {
+    std::array::from_fn(|k| {
+        DVec3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn dragon_box(distance: f64) -> (ObjectViewCell, Aabb) {
+        // a 10 m cubic cell at the origin, a 20 m object whose near side is `distance` from
+        // the cell's border along +X
+        let cell = ObjectViewCell::Box {
+            min: DVec3::splat(-5.0),
+            max: DVec3::splat(5.0),
+        };
+        let object = Aabb::new(
+            DVec3::new(5.0 + distance, -10.0, -10.0),
+            DVec3::new(25.0 + distance, 10.0, 10.0),
+        );
+        (cell, object)
+    }
+
+    #[test]
+    fn box_setup_matches_the_tr_geometry() {
+        let (cell, object) = dragon_box(42.0);
+        let setup = ObjectSetup::new(cell, object, Some(512), 1e-3).expect("setup");
+        let f = &setup.frame;
+        assert!((f.forward - DVec3::X).length() < 1e-12);
+        // the object (20 m) is wider than the cell (10 m): s = m/2
+        assert_eq!(setup.params.s, 5.0);
+        assert!((setup.params.t0 - 42.0).abs() < 1e-9);
+        assert!((setup.params.depth - 20.0).abs() < 1e-9);
+        // frustum fits the near face: half width 10 m at t0 + s = 47 m
+        assert!((f.tan[0] - 10.0 / 47.0).abs() < 1e-5, "{:?}", f.tan);
+        assert!((setup.params.size[0] - 20.0).abs() < 1e-4);
+        assert_eq!(f.origin, DVec3::ZERO);
+    }
+
+    #[test]
+    fn overlapping_and_malformed_cells_are_refused() {
+        let cell = ObjectViewCell::Box {
+            min: DVec3::splat(-5.0),
+            max: DVec3::splat(5.0),
+        };
+        let inside = Aabb::new(DVec3::splat(-1.0), DVec3::splat(1.0));
+        assert!(matches!(
+            ObjectSetup::new(cell, inside, Some(64), 1e-3),
+            Err(ObjectError::Overlap(_))
+        ));
+        for bad in [
+            "box:0,0,0,1,0,1",
+            "box:0,0,0,1,1",
+            "box:0,0,0,1,1,nan",
+            "shaft:0,0,0,0,0,1,180,5",
+            "shaft:0,0,0,0,0,1,0,5",
+            "shaft:0,0,0,0,0,0,30,5",
+            "shaft:0,0,0,0,0,1,30,-1",
+            "cone:0,0,0",
+            "box",
+        ] {
+            let e = ObjectViewCell::parse(bad).expect_err(bad);
+            assert!(matches!(e, ObjectError::ViewCell(_)), "{bad}: {e}");
+        }
+        // a shaft whose cell reaches into the object
+        let shaft = ObjectViewCell::parse("shaft:0,0,0,1,0,0,30,2").expect("shaft");
+        assert!(matches!(
+            ObjectSetup::new(
+                shaft,
+                Aabb::new(DVec3::splat(-5.0), DVec3::splat(5.0)),
+                Some(64),
+                1e-3
+            ),
+            Err(ObjectError::Overlap(_))
+        ));
+    }
+
+    #[test]
+    fn shaft_contains_its_eval_viewpoints_and_not_the_apex_side() {
+        let shaft = ObjectViewCell::parse("shaft:10,2,-3,0.3,0.2,1,40,25").expect("shaft");
+        for (label, p) in shaft.eval_viewpoints(8, 3) {
+            assert!(shaft.contains(p), "{label} {p}");
+        }
+        assert!(!shaft.contains(DVec3::new(10.0, 2.0, -3.0)));
+        let ObjectViewCell::Shaft { dir, .. } = shaft else {
+            unreachable!()
+        };
+        // beyond the side of the shaft at the near border
+        let (right, _) = basis(-dir);
+        let p = DVec3::new(10.0, 2.0, -3.0) + dir * 30.0 + right * 30.0;
+        assert!(!shaft.contains(p));
+    }
+
+    #[test]
+    fn plan_is_far_to_near_in_canonical_depths() {
+        let (cell, object) = dragon_box(96.0);
+        let setup = ObjectSetup::new(cell, object, Some(512), 5e-4).expect("setup");
+        let placement = setup.place().expect("placement");
+        let plan = setup.plan(&placement);
+        let layers = &plan.faces[0].placement.layers;
+        assert_eq!(layers.len(), placement.layers.len());
+        for w in layers.windows(2) {
+            assert!(w[0].distance > w[1].distance);
+            assert_eq!(w[0].near_border, w[1].far_border);
+        }
+        let nearest = layers.last().expect("a layer");
+        assert!(nearest.near_border < setup.params.t0 + setup.params.s);
+        assert!(layers[0].far_border.is_infinite());
+        for l in layers {
+            assert!(l.near_border <= l.distance && l.distance <= l.far_border);
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn frame_maps_invert_and_the_object_lies_in_the_pyramid(
+            dx in -1.0f64..1.0, dy in -1.0f64..1.0, dz in -1.0f64..1.0,
+            angle in 5.0f64..170.0, dist in 1.0f64..50.0,
+            half in 0.5f64..20.0, back in 0.1f64..30.0,
+        ) {
+            let dir = DVec3::new(dx, dy, dz);
+            prop_assume!(dir.length() > 0.1);
+            let dir = dir.normalize();
+            let apex = DVec3::new(3.0, -2.0, 7.0);
+            let spec = format!(
+                "shaft:{},{},{},{},{},{},{angle},{dist}",
+                apex.x, apex.y, apex.z, dir.x, dir.y, dir.z
+            );
+            let shaft = ObjectViewCell::parse(&spec).expect("shaft");
+            // an object around the apex, wholly beyond the near border
+            let object = Aabb::new(apex - DVec3::splat(half.min(0.9 * dist / 1.8)), apex + DVec3::splat(half.min(0.9 * dist / 1.8)));
+            let setup = ObjectSetup::new(shaft, object, Some(256), 1e-3).expect("setup");
+            let f = setup.frame;
+            prop_assert!(f.validate().is_ok());
+            for c in box_corners(&object) {
+                let q = f.to_canonical(c);
+                prop_assert!((f.to_world(q) - c).length() < 1e-9 * (1.0 + c.length()));
+                // inside the +Z face's 90° pyramid and beyond the near field
+                prop_assert!(q.x.abs() <= q.z * (1.0 + 1e-9) && q.y.abs() <= q.z * (1.0 + 1e-9));
+                prop_assert!(q.z >= setup.params.t0 + setup.params.s - 1e-9);
+            }
+            // the reference viewpoint lies in the cell, s behind its near border
+            let eye = f.origin + dir * 1e-9 * dist;
+            prop_assert!(shaft.contains(eye) || setup.params.s == 0.0);
+            let _ = back;
+            // a canonical layer square maps to the frustum cross-section
+            let p = f.to_world(Face::PosZ.point(1.0, -1.0, 10.0));
+            let r = p - f.origin;
+            prop_assert!((r.dot(f.right) / r.dot(f.forward) - f.tan[0]).abs() < 1e-9);
+            prop_assert!((r.dot(f.down) / r.dot(f.forward) + f.tan[1]).abs() < 1e-9);
+        }
+    }
+}
