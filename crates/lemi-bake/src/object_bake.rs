@@ -18,9 +18,9 @@ use lemi_core::cell::CellGrid;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::TexelRect;
 use lemi_core::container::write_atomic;
-use lemi_core::object_cell::{ObjectError, ObjectFrame, ObjectSetup};
+use lemi_core::object_cell::{canonical_scene, complement, ObjectError, ObjectSetup};
 use lemi_core::placement::ObjectPlacement;
-use lemi_core::{Aabb, Face, Scene};
+use lemi_core::{Face, Scene};
 use lemi_gpu::Gpu;
 
 use crate::{BakeError, Baker, Stage};
@@ -33,67 +33,6 @@ pub struct ObjectBake {
     pub placement: ObjectPlacement,
     /// Triangles of the object (replaced by the impostor).
     pub object_triangles: u64,
-}
-
-/// The bounding box of the triangles `object` of `scene` (references past the scene are skipped:
-/// the caller built the list from the scene).
-pub fn object_bounds(scene: &Scene, object: &[TriRef]) -> Aabb {
-    let mut b = Aabb::EMPTY;
-    for r in object {
-        let Some(mesh) = scene.meshes.get(r.mesh as usize) else {
-            continue;
-        };
-        let i = 3 * r.tri as usize;
-        for &v in mesh.indices.get(i..i + 3).unwrap_or(&[]) {
-            if let Some(v) = mesh.vertices.get(v as usize) {
-                b.grow(glam::DVec3::from_array(v.position.map(f64::from)));
-            }
-        }
-    }
-    b
-}
-
-/// The triangles `object` of `scene` in the canonical frame of `frame` (positions mapped, normals,
-/// texture coordinates, colours and materials as they are).
-pub fn canonical_scene(
-    scene: &Scene,
-    object: &[TriRef],
-    frame: &ObjectFrame,
-) -> Result<Scene, BakeError> {
-    let mut meshes = scene
-        .extract(object)
-        .map_err(|e| BakeError::Object(ObjectError::Object(e.to_string())))?;
-    let mut bounds = Aabb::EMPTY;
-    for mesh in &mut meshes {
-        for v in &mut mesh.vertices {
-            let c = frame.to_canonical(glam::DVec3::from_array(v.position.map(f64::from)));
-            bounds.grow(c);
-            v.position = c.as_vec3().to_array();
-        }
-    }
-    Ok(Scene {
-        meshes,
-        materials: scene.materials.clone(),
-        textures: scene.textures.clone(),
-        bounds,
-        stats: scene.stats.clone(),
-        sources: scene.sources.clone(),
-    })
-}
-
-/// Every triangle of `scene` not in `object` (sorted by mesh and triangle), in scene order.
-pub fn complement(scene: &Scene, object: &[TriRef]) -> Vec<[u32; 2]> {
-    let mut sorted: Vec<(u32, u32)> = object.iter().map(|r| (r.mesh, r.tri)).collect();
-    sorted.sort_unstable();
-    let mut out = Vec::new();
-    for (m, mesh) in scene.meshes.iter().enumerate() {
-        for t in 0..mesh.triangle_count() as u32 {
-            if sorted.binary_search(&(m as u32, t)).is_err() {
-                out.push([m as u32, t]);
-            }
-        }
-    }
-    out
 }
 
 /// The bake parameters of an object impostor: one face (`+Z` of the canonical frame), its
@@ -126,7 +65,8 @@ pub fn bake_object(
     let t = Instant::now();
     let placement = setup.place()?;
     let plan = setup.plan(&placement);
-    let canonical = canonical_scene(scene, object, &setup.frame)?;
+    let canonical = canonical_scene(scene, object, &setup.frame)
+        .map_err(|e| BakeError::Object(ObjectError::Object(e.to_string())))?;
     let seconds = vec![("placement".to_string(), t.elapsed().as_secs_f64())];
     let baker = Baker::new(gpu, &canonical, params)?;
     let cell = setup.canonical_cell();

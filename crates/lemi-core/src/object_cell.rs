@@ -30,13 +30,14 @@ use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::cell::ViewCell;
-use crate::classify::Slabs;
+use crate::classify::{Slabs, TriRef};
 use crate::layering::{CellPlan, FacePlan};
 use crate::placement::{
     place_object_layers, schaufler_res, EnvParams, Layer, ObjectCell, ObjectParams,
     ObjectPlacement, Placement,
 };
-use crate::{Aabb, Face};
+use crate::scene::ExtractError;
+use crate::{Aabb, Face, Scene};
 
 /// Why an object impostor cannot be set up; the message says which input is wrong and why (the
 /// command line adds the flag's name).
@@ -561,6 +562,65 @@ impl ObjectSetup {
     pub fn object_centre(&self) -> DVec3 {
         self.object.center()
     }
+}
+
+/// The bounding box of the triangles `object` of `scene` (references past the scene are skipped:
+/// the caller built the list from the scene).
+pub fn object_bounds(scene: &Scene, object: &[TriRef]) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for r in object {
+        let Some(mesh) = scene.meshes.get(r.mesh as usize) else {
+            continue;
+        };
+        let i = 3 * r.tri as usize;
+        for &v in mesh.indices.get(i..i + 3).unwrap_or(&[]) {
+            if let Some(v) = mesh.vertices.get(v as usize) {
+                b.grow(glam::DVec3::from_array(v.position.map(f64::from)));
+            }
+        }
+    }
+    b
+}
+
+/// The triangles `object` of `scene` in the canonical frame of `frame` (positions mapped, normals,
+/// texture coordinates, colours and materials as they are).
+pub fn canonical_scene(
+    scene: &Scene,
+    object: &[TriRef],
+    frame: &ObjectFrame,
+) -> Result<Scene, ExtractError> {
+    let mut meshes = scene.extract(object)?;
+    let mut bounds = Aabb::EMPTY;
+    for mesh in &mut meshes {
+        for v in &mut mesh.vertices {
+            let c = frame.to_canonical(glam::DVec3::from_array(v.position.map(f64::from)));
+            bounds.grow(c);
+            v.position = c.as_vec3().to_array();
+        }
+    }
+    Ok(Scene {
+        meshes,
+        materials: scene.materials.clone(),
+        textures: scene.textures.clone(),
+        bounds,
+        stats: scene.stats.clone(),
+        sources: scene.sources.clone(),
+    })
+}
+
+/// Every triangle of `scene` not in `object` (sorted by mesh and triangle), in scene order.
+pub fn complement(scene: &Scene, object: &[TriRef]) -> Vec<[u32; 2]> {
+    let mut sorted: Vec<(u32, u32)> = object.iter().map(|r| (r.mesh, r.tri)).collect();
+    sorted.sort_unstable();
+    let mut out = Vec::new();
+    for (m, mesh) in scene.meshes.iter().enumerate() {
+        for t in 0..mesh.triangle_count() as u32 {
+            if sorted.binary_search(&(m as u32, t)).is_err() {
+                out.push([m as u32, t]);
+            }
+        }
+    }
+    out
 }
 
 /// The 8 corners of a box.

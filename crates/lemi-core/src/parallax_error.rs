@@ -43,6 +43,10 @@ pub struct LayerDepths {
     pub distances: Vec<Vec<f64>>,
     /// Per face, per layer (far to near), `res · res` depths, row-major, row 0 at the top.
     pub depth: Vec<Vec<Vec<f32>>>,
+    /// An object impostor's frame ([`crate::object_cell`]): the faces, distances and depths are
+    /// then those of its canonical frame (reference viewpoint at the canonical origin, `center`
+    /// unused), and world points are mapped by it.
+    pub frame: Option<crate::object_cell::ObjectFrame>,
 }
 
 /// Which layer texel a world point on a layer plane belongs to.
@@ -61,10 +65,27 @@ pub struct LayerTexel {
 }
 
 impl LayerDepths {
+    /// The world point `x` relative to the reference viewpoint, in the frame the faces are in.
+    pub fn relative(&self, x: DVec3) -> DVec3 {
+        match &self.frame {
+            Some(f) => f.to_canonical(x),
+            None => x - self.center,
+        }
+    }
+
+    /// The world point of the point `rel` relative to the reference viewpoint (inverse of
+    /// [`LayerDepths::relative`]).
+    pub fn world(&self, rel: DVec3) -> DVec3 {
+        match &self.frame {
+            Some(f) => f.to_world(rel),
+            None => self.center + rel,
+        }
+    }
+
     /// The layer texel that the world point `x` lies on (within a relative `tolerance` of a layer
     /// plane and inside its face's image), if any.
     pub fn texel_of(&self, x: DVec3, tolerance: f64) -> Option<LayerTexel> {
-        let rel = x - self.center;
+        let rel = self.relative(x);
         let mut best: Option<(f64, LayerTexel)> = None;
         for (slot, &face) in self.faces.iter().enumerate() {
             let Some((s, t, d)) = face.project(rel) else {
@@ -225,8 +246,8 @@ pub fn pixel_errors(
             (c.w > 0.0).then(|| view.ndc_to_pixel(DVec2::new(c.x / c.w, c.y / c.w)))
         };
         let (Some(q), Some(l)) = (
-            project(layers.center + face.point(s, t, d)),
-            project(layers.center + face.point(s, t, dk)),
+            project(layers.world(face.point(s, t, d))),
+            project(layers.world(face.point(s, t, dk))),
         ) else {
             continue;
         };
@@ -249,6 +270,7 @@ mod tests {
             faces: vec![Face::PosZ],
             distances: vec![vec![big_d]],
             depth: vec![vec![vec![d; (res * res) as usize]]],
+            frame: None,
         }
     }
 

@@ -92,7 +92,15 @@ pub fn side_by_side(
 /// counts as a crack: one layer's slab (the slab containing `r`, infinite for the farthest) plus
 /// the cell's diagonal (the view depth from a viewpoint off the centre differs from the distance
 /// to the centre by at most that); within the near field, the diagonal.
+///
+/// An object impostor's layers represent the whole object: a pixel may show any depth of it, so
+/// the tolerance is the object's depth along the axis plus the cell's width and `2s` (the view
+/// depth from a viewpoint in the cell differs from the canonical depth by at most that).
 pub fn layer_slab_tolerance(file: &CellFile, cell: &ViewCell, r: f32) -> f32 {
+    if let Some(o) = &file.header.object {
+        let n = o.params.cell.near_width();
+        return (o.params.depth + 2.0 * o.params.s + n[0].hypot(n[1])) as f32;
+    }
     let diag = 2.0 * cell.half.length();
     let Some(layers) = file.header.layers.first() else {
         return f32::INFINITY;

@@ -12,6 +12,8 @@ use glam::DVec3;
 use lemi_core::bundle::{Bundle, CellFile, Manifest};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::{eval_directions, eval_viewpoints, CellId, ViewCell};
+use lemi_core::classify::TriRef;
+use lemi_core::object_cell::{canonical_scene, complement};
 use lemi_core::parallax_error::{pixel_errors, LayerDepths};
 use lemi_core::Scene;
 use lemi_gpu::{
@@ -173,10 +175,19 @@ impl CellRenderer for LayeredCells<'_> {
         let gpu_cell =
             ImpostorCell::upload_file(self.gpu, self.materials.clone(), self.scene, &file)
                 .map_err(gpu_err(format!("uploading cell {id}")))?;
-        let depths = self
-            .recorder
-            .record_depths(cell)
-            .map_err(|e| err(format!("cell {id}: {e}")))?;
+        let depths = match &self.bundle.manifest().object {
+            None => self.recorder.record_depths(cell),
+            Some(o) => {
+                let placement = o.place().map_err(|e| err(format!("cell {id}: {e}")))?;
+                self.recorder
+                    .record_depths_planned(&o.canonical_cell(), &o.plan(&placement))
+                    .map(|d| LayerDepths {
+                        frame: Some(o.frame),
+                        ..d
+                    })
+            }
+        }
+        .map_err(|e| err(format!("cell {id}: {e}")))?;
         self.current = Some((*cell, file, gpu_cell, depths));
         Ok(())
     }
@@ -224,14 +235,44 @@ pub fn evaluate_bundle(
             .map_err(|e| err(format!("uploading materials: {e}")))?,
     );
     let manifest = bundle.manifest();
+    // an object bundle's layers are re-recorded from the object's triangles (every one its cell
+    // does not draw as geometry) in its canonical frame
+    let object_scene = match &manifest.object {
+        None => None,
+        Some(o) => {
+            let id = bundle
+                .cell_ids()
+                .first()
+                .copied()
+                .ok_or_else(|| err("the object bundle has no cell"))?;
+            let file = bundle.cell(id).map_err(|e| err(e.to_string()))?;
+            let drawn: Vec<TriRef> = file
+                .near
+                .iter()
+                .map(|&[mesh, tri]| TriRef { mesh, tri })
+                .collect();
+            let object: Vec<TriRef> = complement(scene, &drawn)
+                .into_iter()
+                .map(|[mesh, tri]| TriRef { mesh, tri })
+                .collect();
+            Some(
+                canonical_scene(scene, &object, &o.frame)
+                    .map_err(|e| err(format!("cell {id}: {e}")))?,
+            )
+        }
+    };
     let mut cells = LayeredCells {
         gpu,
         bundle,
         scene,
         materials,
         renderer: ImpostorRenderer::new(gpu).map_err(|e| err(format!("impostor renderer: {e}")))?,
-        recorder: CellRecorder::new(gpu, scene, manifest.params.clone())
-            .map_err(|e| err(format!("preparing to re-record depths: {e}")))?,
+        recorder: CellRecorder::new(
+            gpu,
+            object_scene.as_ref().unwrap_or(scene),
+            manifest.params.clone(),
+        )
+        .map_err(|e| err(format!("preparing to re-record depths: {e}")))?,
         render_options: RenderOptions {
             clear: options.clear,
             ..Default::default()
@@ -239,6 +280,50 @@ pub fn evaluate_bundle(
         current: None,
     };
     evaluate_with(gpu, bundle, scene, options, &mut cells, progress)
+}
+
+/// The viewpoints of `cell` and the directions judged from each, with labels: for a cell of an
+/// environment-map bundle its centre, corners, midpoints and random points
+/// ([`eval_viewpoints`]), each looking along every baked face and their diagonals
+/// ([`eval_directions`]); for an object bundle the viewpoints over its box or shaft
+/// ([`lemi_core::object_cell::ObjectViewCell::eval_viewpoints`]), each looking at the object's
+/// centre. [`ViewpointSet::Corners`] keeps the centres, corners and random points.
+pub fn eval_views(
+    manifest: &Manifest,
+    cell: &ViewCell,
+    options: &EvalOptions,
+) -> Vec<(String, DVec3, Vec<(String, DVec3)>)> {
+    let (points, directions) = match &manifest.object {
+        Some(o) => (
+            o.cell
+                .eval_viewpoints(options.random_viewpoints, options.seed),
+            None,
+        ),
+        None => (
+            eval_viewpoints(cell, options.random_viewpoints, options.seed),
+            Some(eval_directions(&manifest.params.faces)),
+        ),
+    };
+    points
+        .into_iter()
+        .filter(|(l, _)| {
+            options.set == ViewpointSet::Full
+                || l.ends_with("centre")
+                || l.contains("corner")
+                || l.starts_with("random")
+        })
+        .map(|(label, eye)| {
+            let dirs = match (&directions, &manifest.object) {
+                (Some(d), _) => d.clone(),
+                (None, Some(o)) => vec![(
+                    "at the object".to_string(),
+                    (o.object_centre() - eye).normalize_or(o.frame.forward),
+                )],
+                (None, None) => Vec::new(),
+            };
+            (label, eye, dirs)
+        })
+        .collect()
 }
 
 /// Evaluates the cells of a bundle as `renderer` draws them (any far-field strategy): the same
@@ -280,7 +365,6 @@ pub fn evaluate_with(
         clear: options.clear,
         ..Default::default()
     };
-    let directions = eval_directions(&manifest.params.faces);
     let mut cells = Vec::with_capacity(ids.len());
     let mut worst = WorstSet::new(WORST_PER_BUNDLE);
     let mut points_per_cell = Vec::new();
@@ -290,18 +374,9 @@ pub fn evaluate_with(
             .grid
             .cell_of(*id)
             .map_err(|e| err(format!("--cells: {e}")))?;
-        let mut points = eval_viewpoints(&cell, options.random_viewpoints, options.seed);
-        if options.set == ViewpointSet::Corners {
-            points.retain(|(l, _)| {
-                l == "centre" || l.starts_with("corner") || l.starts_with("random")
-            });
-        }
-        points_per_cell.push((cell, points));
+        points_per_cell.push((cell, eval_views(manifest, &cell, options)));
     }
-    let total: usize = points_per_cell
-        .iter()
-        .map(|(_, p)| p.len() * directions.len())
-        .sum();
+    let total: usize = points_per_cell.iter().map(|(_, p)| p.len()).sum();
     let mut done = 0;
     for (cell, points) in &points_per_cell {
         let id = cell.id().to_string();
@@ -311,8 +386,8 @@ pub fn evaluate_with(
         let mut own = PixelErrorStats::new();
         let mut gap = PixelErrorStats::new();
         let mut views = Vec::new();
-        for (label, eye) in points {
-            for (dname, dir) in &directions {
+        for (label, eye, directions) in points {
+            for (dname, dir) in directions {
                 progress(done, total, &format!("cell {id}: {label}, looking {dname}"));
                 done += 1;
                 let cam = camera(*eye, *dir, fov_x, w, h)?;

@@ -184,8 +184,18 @@ impl<'a> CellRecorder<'a> {
     /// same layers, same recorded depth ranges and coverage).
     pub fn record_depths(&self, cell: &ViewCell) -> Result<LayerDepths, RecordError> {
         let plan = self.plan(cell)?;
-        let class = self.classify(cell, &plan);
-        let rec = self.record_layers(cell, &plan, &class, true, &mut |_, _, _| {})?;
+        self.record_depths_planned(cell, &plan)
+    }
+
+    /// [`CellRecorder::record_depths`] for layers already planned (an object impostor's plan in
+    /// its canonical frame; the caller sets the result's `frame`).
+    pub fn record_depths_planned(
+        &self,
+        cell: &ViewCell,
+        plan: &CellPlan,
+    ) -> Result<LayerDepths, RecordError> {
+        let class = self.classify(cell, plan);
+        let rec = self.record_layers(cell, plan, &class, true, &mut |_, _, _| {})?;
         Ok(LayerDepths {
             center: cell.center,
             res: self.params.resolution,
@@ -196,6 +206,7 @@ impl<'a> CellRecorder<'a> {
                 .map(|f| f.placement.layers.iter().map(|l| l.distance).collect())
                 .collect(),
             depth: rec.depths,
+            frame: None,
         })
     }
 

@@ -85,6 +85,7 @@ impl CellLayers {
                 faces: params.faces.clone(),
                 distances,
                 depth: Vec::new(),
+                frame: None,
             },
         })
     }
@@ -92,7 +93,7 @@ impl CellLayers {
     /// The layer (index far to near) whose plane the world point `p` lies on, within a relative
     /// [`PLANE_TOLERANCE`]; `None` off every plane.
     pub fn layer_of(&self, p: DVec3) -> Option<usize> {
-        let rel = p - self.depths.center;
+        let rel = self.depths.relative(p);
         let a = rel.abs();
         let (axis, d) = if a.x >= a.y && a.x >= a.z {
             (0, rel.x)
