@@ -282,6 +282,9 @@ pub fn evaluate_bundle(
     evaluate_with(gpu, bundle, scene, options, &mut cells, progress)
 }
 
+/// A labelled viewpoint and the labelled view directions judged from it.
+pub type EvalViewpoint = (String, DVec3, Vec<(String, DVec3)>);
+
 /// The viewpoints of `cell` and the directions judged from each, with labels: for a cell of an
 /// environment-map bundle its centre, corners, midpoints and random points
 /// ([`eval_viewpoints`]), each looking along every baked face and their diagonals
@@ -292,7 +295,7 @@ pub fn eval_views(
     manifest: &Manifest,
     cell: &ViewCell,
     options: &EvalOptions,
-) -> Vec<(String, DVec3, Vec<(String, DVec3)>)> {
+) -> Vec<EvalViewpoint> {
     let (points, directions) = match &manifest.object {
         Some(o) => (
             o.cell
