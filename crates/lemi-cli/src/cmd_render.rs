@@ -271,6 +271,18 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         }
     }
     let cam = camera(&args, &scene.bounds)?;
+    if let Some(o) = &opened.manifest().object {
+        if !o.cell.contains(cam.eye) {
+            return render_outside_object(
+                &args,
+                &bundle,
+                &scene,
+                &cam,
+                backend,
+                &o.cell.describe(),
+            );
+        }
+    }
     let (cell, file) = opened
         .cell_at(cam.eye)
         .context("the eye must lie in a baked cell")?;
@@ -384,6 +396,61 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
             ""
         }
     );
+    Ok(())
+}
+
+/// `lemi render OBJECT_BUNDLE` from outside the object impostor's view cell: the impostor's
+/// guarantee does not hold there, so the whole scene, the object included, is drawn as geometry.
+fn render_outside_object(
+    args: &Args,
+    bundle: &Path,
+    scene: &lemi_core::Scene,
+    cam: &Camera,
+    backend: BackendChoice,
+    cell: &str,
+) -> anyhow::Result<()> {
+    let gpu = Gpu::new(backend)?;
+    let gpu_scene =
+        GpuScene::upload(&gpu, scene, &UploadOptions::default()).context("uploading the scene")?;
+    let options = RenderOptions {
+        clear: args.clear,
+        ..Default::default()
+    };
+    let view = cam.view();
+    let renderer = Renderer::new(&gpu)?;
+    let (frame, render_seconds) = render_timed(args.frames, || {
+        renderer
+            .render(&gpu_scene, &view, &options)
+            .context("rendering")
+    })?;
+    save_rgba(&frame, &args.output)?;
+    let note = format!(
+        "the eye lies outside the object impostor's view cell {cell}: the object is drawn as \
+         geometry (an impostor is never shown outside its guarantee)"
+    );
+    if args.json {
+        let out = json!({
+            "output": args.output,
+            "bundle": bundle,
+            "cell": null,
+            "impostor": false,
+            "note": note,
+            "triangles": scene.triangle_count(),
+            "eye": cam.eye.to_array(),
+            "forward": cam.forward.to_array(),
+            "render_seconds": render_seconds,
+            "frames": args.frames,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!("adapter    {}", gpu.describe());
+    println!("note       {note}");
+    println!(
+        "geometry   {} triangles, render {render_seconds:.3} s",
+        scene.triangle_count()
+    );
+    println!("wrote      {}", args.output.display());
     Ok(())
 }
 

@@ -211,6 +211,8 @@ pub struct Streamer {
     gpu: Arc<Gpu>,
     materials: Arc<GpuMaterials>,
     grid: CellGrid,
+    /// An object bundle's view cell: its one cell serves only viewpoints inside it.
+    object: Option<lemi_core::object_cell::ObjectViewCell>,
     bundle: PathBuf,
     /// Baked cells: id → manifest file size.
     baked: HashMap<CellId, u64>,
@@ -274,6 +276,7 @@ impl Streamer {
             baked.insert(e.id, e.bytes);
         }
         let grid = manifest.grid.clone();
+        let object = manifest.object.as_ref().map(|o| o.cell);
         let block_formats = match manifest.params.texture_format.block() {
             Some(format) if !gpu.has_block_format(format) => {
                 eprintln!(
@@ -302,6 +305,7 @@ impl Streamer {
             gpu,
             materials,
             grid,
+            object,
             bundle: bundle_dir.to_path_buf(),
             baked,
             cache: Cache::new(options.cache_budget_bytes),
@@ -369,7 +373,7 @@ impl Streamer {
     ) -> Result<Vec<String>, RuntimeError> {
         let t0 = Instant::now();
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id());
+        let current = self.locate(position);
         loop {
             self.receive(&mut ev);
             let wanted = self.wanted(position, velocity, current);
@@ -419,7 +423,7 @@ impl Streamer {
             self.stats.seconds += dt;
         }
         let mut ev = Events::default();
-        let current = self.grid.locate(position).map(|c| c.id());
+        let current = self.locate(position);
         self.receive(&mut ev);
         let wanted = self.wanted(position, velocity, current);
         self.request(&wanted);
@@ -500,6 +504,18 @@ impl Streamer {
 
     /// The cells to have ready, most wanted first: the current cell (if baked and not failed),
     /// then the predicted ones while their estimated sizes fit the cache budget.
+    /// The cell serving `position` (see `Manifest::locate`).
+    fn locate(&self, position: DVec3) -> Option<CellId> {
+        match &self.object {
+            Some(o) => o
+                .contains(position)
+                .then(|| self.grid.cell(glam::IVec3::ZERO))
+                .flatten()
+                .map(|c| c.id()),
+            None => self.grid.locate(position).map(|c| c.id()),
+        }
+    }
+
     fn wanted(&self, position: DVec3, velocity: DVec3, current: Option<CellId>) -> Vec<CellId> {
         let o = &self.options;
         let popts = PredictOptions {

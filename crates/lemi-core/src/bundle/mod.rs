@@ -581,6 +581,19 @@ pub fn cell_file_name(id: CellId) -> String {
 }
 
 impl Manifest {
+    /// The view cell whose impostors serve the viewpoint `p` (baked or not): the grid cell holding
+    /// it (half-open on the upper side), or for an object bundle its one cell if `p` lies in the
+    /// object's view cell, and nothing elsewhere (there the object is drawn as geometry).
+    pub fn locate(&self, p: DVec3) -> Option<ViewCell> {
+        match &self.object {
+            Some(o) => self
+                .grid
+                .cell(glam::IVec3::ZERO)
+                .filter(|_| o.cell.contains(p)),
+            None => self.grid.locate(p),
+        }
+    }
+
     /// Reads `manifest.json` and checks its format and version (what [`Bundle::open`] builds
     /// on; use that to read cells).
     ///

@@ -210,10 +210,7 @@ impl Bundle {
     pub fn locate(&self, point: DVec3) -> Result<ViewCell, BundleError> {
         let grid = &self.manifest.grid;
         if let Some(o) = &self.manifest.object {
-            let cell = grid
-                .cell(glam::IVec3::ZERO)
-                .filter(|_| o.cell.contains(point));
-            return cell.ok_or_else(|| {
+            return self.manifest.locate(point).ok_or_else(|| {
                 BundleError::new(
                     &self.dir,
                     BundleErrorKind::OutsideObjectCell {
