@@ -41,7 +41,12 @@ fn scene() -> &'static Scene {
 fn triangles(s: &Scene, interior: bool) -> Vec<[Vec3; 3]> {
     s.meshes
         .iter()
-        .filter(|m| s.materials[m.material as usize].name.starts_with("interior-") == interior)
+        .filter(|m| {
+            s.materials[m.material as usize]
+                .name
+                .starts_with("interior-")
+                == interior
+        })
         .flat_map(|m| (0..m.triangle_count()).map(|t| m.triangle(t)))
         .collect()
 }
@@ -78,7 +83,10 @@ fn parses_interior_specs() {
     assert_eq!(d.scene, Builtin::Interior);
     assert_eq!(d.normalized(), "builtin:interior:200000:1");
     let s = spec("interior:200k:3");
-    assert_eq!((s.scene, s.triangles, s.seed), (Builtin::Interior, 200_000, 3));
+    assert_eq!(
+        (s.scene, s.triangles, s.seed),
+        (Builtin::Interior, 200_000, 3)
+    );
     assert_eq!(spec("builtin:INTERIOR:10k").triangles, 10_000);
     assert!(Builtin::ALL.contains(&Builtin::Interior));
     assert_eq!(Builtin::Interior.name(), "interior");
@@ -177,7 +185,10 @@ fn portals_lie_on_their_rooms_walls_and_face_out() {
         };
         assert!((p.width - size.0).abs() < 1e-5 && (p.height - size.1).abs() < 1e-5);
         if p.kind == PortalKind::Window {
-            assert!((c.y - 0.5 * p.height - (FLOOR_Y + 0.9)).abs() < 1e-5, "sill");
+            assert!(
+                (c.y - 0.5 * p.height - (FLOOR_Y + 0.9)).abs() < 1e-5,
+                "sill"
+            );
         }
     }
 }
@@ -243,7 +254,10 @@ fn the_building_stands_clear_of_the_city() {
 fn faces_are_wound_with_their_normals() {
     let s = scene();
     for m in &s.meshes {
-        if !s.materials[m.material as usize].name.starts_with("interior-") {
+        if !s.materials[m.material as usize]
+            .name
+            .starts_with("interior-")
+        {
             continue;
         }
         for t in 0..m.triangle_count() {

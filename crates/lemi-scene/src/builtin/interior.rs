@@ -9,9 +9,9 @@
 //! **Where.** The building stands on the city's main avenue, east of the origin: outer walls
 //! `x ∈ [12.0, 28.6]`, `z ∈ [−7.3, 7.3]`, on the ground (`y = 0`), eaves at 6.6 m, hipped roof to
 //! 9.4 m. That place is free in every city: the city puts no building or tree within
-//! `|z| < AVENUE_FREE_HALF_WIDTH` (15 m, only the avenue's cobbled promenade and asphalt at
-//! `y = 0` lie there), nor within `PLAZA_FREE_RADIUS` (40 m) of the origin, and the building's
-//! farthest corner is 29.5 m from the origin. The origin itself stays free (12 m from the west wall),
+//! `|z| <` [`AVENUE_FREE_HALF_WIDTH`] (15 m), nor within [`PLAZA_FREE_RADIUS`] (40 m) of the
+//! origin: there it lays only ground at `y = 0` (cobbles, asphalt), which the building stands on.
+//! The building's farthest corner is 29.5 m from the origin and 7.7 m inside the avenue's edge. The origin itself stays free (12 m from the west wall),
 //! so the spawn point of [`super::BuiltinSpec::spawn_eye`] is unchanged; it faces the door.
 //!
 //! **Plan.** Two storeys high, one floor inside: four rooms of 8.0 × 7.0 m (west = −X, south = −Z)
@@ -27,8 +27,9 @@
 //! rows at their sills and heads; every piece is triangulated with the vertices its neighbours put
 //! on its sides (columns beside a window get the window's sill and head), so no vertex lies inside
 //! another triangle's edge on a shared plane (no T-junction cracks): faces, reveals (the 0.2 m sides
-//! of every opening), end caps and top caps close each wall. Walls that butt into another wall are
-//! open at that end and stand open on the ground (both ends are sealed by the surface they meet).
+//! of every opening), end caps and top caps close each wall. A wall has no face where it is sealed
+//! by the surface it meets: none at an end that butts into another wall, none at its foot on the
+//! ground.
 //! Floors carry the doorways' edges so thresholds meet them vertex to vertex.
 //!
 //! Materials follow the city's conventions (base colour × texture × vertex colour, UVs in metres
@@ -38,6 +39,9 @@
 
 use glam::Vec3;
 use lemi_core::{Material, SceneBuilder};
+
+#[cfg(doc)]
+use super::{AVENUE_FREE_HALF_WIDTH, PLAZA_FREE_RADIUS};
 
 use super::geom::{facade_u, facade_v, Buf, Emitter};
 use super::rng::shade;
@@ -378,6 +382,9 @@ fn span(lo: f32, hi: f32, v: impl IntoIterator<Item = f32>) -> Vec<f32> {
     out
 }
 
+/// Vertices along one side of a patch: (position along the side, vertex index).
+type Chain = Vec<(f32, u32)>;
+
 /// The rectangle `[u0, u1] × [v0, v1]` of a plane, `map` taking `(u, v)` to the world, triangulated
 /// through the vertices its neighbours put on its sides: `left` (the `v` values on `u = u0`, sorted,
 /// `v0` and `v1` included), `right` (on `u = u1`), `bottom` (the `u` values on `v = v0`) and `top`.
@@ -401,8 +408,7 @@ fn patch(
         let p = map(u, v);
         buf.vert(p, n, uv(p), c)
     };
-    let chains: Option<(Vec<(f32, u32)>, Vec<(f32, u32)>)> = if bottom.len() == 2 && top.len() == 2
-    {
+    let chains: Option<(Chain, Chain)> = if bottom.len() == 2 && top.len() == 2 {
         Some((
             left.iter().map(|&v| (v, vert(u0, v))).collect(),
             right.iter().map(|&v| (v, vert(u1, v))).collect(),
