@@ -11,8 +11,9 @@
 //! 9.4 m. That place is free in every city: the city puts no building or tree within
 //! `|z| <` [`AVENUE_FREE_HALF_WIDTH`] (15 m), nor within [`PLAZA_FREE_RADIUS`] (40 m) of the
 //! origin: there it lays only ground at `y = 0` (cobbles, asphalt), which the building stands on.
-//! The building's farthest corner is 29.5 m from the origin and 7.7 m inside the avenue's edge. The origin itself stays free (12 m from the west wall),
-//! so the spawn point of [`super::BuiltinSpec::spawn_eye`] is unchanged; it faces the door.
+//! The building's farthest corner is 29.5 m from the origin, its long sides 7.7 m inside the free
+//! avenue's edges. The origin itself stays free (12 m from the west wall), so the spawn point of
+//! [`super::BuiltinSpec::spawn_eye`] is unchanged; it faces the building's door.
 //!
 //! **Plan.** Two storeys high, one floor inside: four rooms of 8.0 × 7.0 m (west = −X, south = −Z)
 //! around a cross of interior walls, floor at 0.15 m, ceiling at 3.15 m; the upper storey is a closed
@@ -29,8 +30,7 @@
 //! another triangle's edge on a shared plane (no T-junction cracks): faces, reveals (the 0.2 m sides
 //! of every opening), end caps and top caps close each wall. A wall has no face where it is sealed
 //! by the surface it meets: none at an end that butts into another wall, none at its foot on the
-//! ground.
-//! Floors carry the doorways' edges so thresholds meet them vertex to vertex.
+//! ground. Floors carry the doorways' edges so thresholds meet them vertex to vertex.
 //!
 //! Materials follow the city's conventions (base colour × texture × vertex colour, UVs in metres
 //! over tile size): `interior-facade` (the city's facade texture, painted windows on the closed
@@ -71,6 +71,11 @@ const WINDOW_Y0: f32 = 1.05;
 const WINDOW_Y1: f32 = 2.45;
 const DOOR_W: f32 = 1.0;
 const DOOR_Y1: f32 = 2.35;
+/// Centre of the doorway between the two west rooms, along X.
+const DOORWAY_WEST_X: f32 = 18.5;
+/// Centres of the doorways between the south rooms and between the north rooms, along Z.
+const DOORWAY_SOUTH_Z: f32 = -2.0;
+const DOORWAY_NORTH_Z: f32 = 2.0;
 /// Boards of the floor texture repeat every this many metres.
 const FLOOR_TILE: f32 = 2.0;
 
@@ -85,6 +90,7 @@ const MATERIALS: usize = 4;
 /// floor and ceiling).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Room {
+    /// `south-west`, `south-east`, `north-west` or `north-east` (west = −X, south = −Z).
     pub name: String,
     pub min: [f32; 3],
     pub max: [f32; 3],
@@ -105,9 +111,13 @@ pub struct Portal {
     /// Index into [`InteriorLayout::rooms`].
     pub room: usize,
     pub kind: PortalKind,
+    /// Centre of the opening, on the plane of the wall's outer face.
     pub center: [f32; 3],
+    /// Horizontal size of the opening, along the wall (m).
     pub width: f32,
+    /// Vertical size of the opening (m).
     pub height: f32,
+    /// Unit normal of the wall, pointing out of the building: one of ±X, ±Z.
     pub outward: [f32; 3],
 }
 
@@ -115,6 +125,7 @@ pub struct Portal {
 #[derive(Clone, Debug, PartialEq)]
 pub struct InteriorLayout {
     pub rooms: Vec<Room>,
+    /// Every opening to the outside, ordered by room.
     pub portals: Vec<Portal>,
     /// Corner of the building's bounding box (walls, floor, roof) with the smallest coordinates.
     pub building_min: [f32; 3],
@@ -294,7 +305,7 @@ fn walls() -> Vec<Wall> {
             XS[4],
             ZS[2],
             ZS[3],
-            vec![door(18.5, None, 0)],
+            vec![door(DOORWAY_WEST_X, None, 0)],
             vec![(XS[2], -1), (XS[3], -1), (XS[2], 1), (XS[3], 1)],
         ),
         inner(
@@ -303,7 +314,7 @@ fn walls() -> Vec<Wall> {
             ZS[2],
             XS[2],
             XS[3],
-            vec![door(-2.0, None, 0)],
+            vec![door(DOORWAY_SOUTH_Z, None, 0)],
             vec![],
         ),
         inner(
@@ -312,7 +323,7 @@ fn walls() -> Vec<Wall> {
             ZS[4],
             XS[2],
             XS[3],
-            vec![door(2.0, None, 2)],
+            vec![door(DOORWAY_NORTH_Z, None, 2)],
             vec![],
         ),
     ]
@@ -372,7 +383,7 @@ const LOOK: Look = Look {
     roof: [168, 72, 48, 255],
 };
 
-/// The sorted values of `v` strictly between `lo` and `hi`, between `lo` and `hi`.
+/// `lo`, the values of `v` strictly between `lo` and `hi`, and `hi`: sorted, without repeats.
 fn span(lo: f32, hi: f32, v: impl IntoIterator<Item = f32>) -> Vec<f32> {
     let mut out: Vec<f32> = v.into_iter().filter(|&x| x > lo && x < hi).collect();
     out.push(lo);
@@ -516,6 +527,12 @@ fn emit_wall(w: &Wall, e: &mut Emitter) {
     let top_band = bands.len() - 2;
     let along = w.along();
     let across = w.across();
+    // Caps and reveals: the outer colour on outer walls.
+    let trim = if w.outside != 0 {
+        shade(LOOK.outside, 0.9)
+    } else {
+        LOOK.inside
+    };
     // The face at c0 faces −across, the one at c1 faces +across.
     for (side, c, n) in [(-1i8, w.c0, -across), (1, w.c1, across)] {
         let map = |a: f32, y: f32| w.at(a, y, c);
@@ -546,7 +563,7 @@ fn emit_wall(w: &Wall, e: &mut Emitter) {
             let (buf, colour, uv): (usize, [u8; 4], &dyn Fn(Vec3) -> [f32; 2]) =
                 match (outside, b == top_band && w.outside != 0) {
                     (true, true) => (FACADE, LOOK.outside, &facade_uv),
-                    (true, false) => (PLASTER, shade(LOOK.outside, 0.9), &no_uv),
+                    (true, false) => (PLASTER, trim, &no_uv),
                     (false, _) => (PLASTER, LOOK.inside, &no_uv),
                 };
             let u = &ulines[b];
@@ -598,11 +615,6 @@ fn emit_wall(w: &Wall, e: &mut Emitter) {
             }
         }
     }
-    let trim = if w.outside != 0 {
-        shade(LOOK.outside, 0.9)
-    } else {
-        LOOK.inside
-    };
     let plaster = &mut e.bufs[PLASTER];
     // End caps: at each end, one quad per piece of the end column.
     if w.caps {
