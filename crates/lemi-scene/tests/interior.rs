@@ -1,7 +1,7 @@
 //! Tests of `builtin:interior`: parsing, determinism, budget, the layout (rooms, portals, building
 //! box), the building standing clear of the city, the meshes (winding, no T-junction on a shared
 //! plane), and brute-force rays: through every opening the way out is free, beside it the wall is
-//! solid.
+//! solid, and no ray leaves a room but through an opening.
 
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -352,4 +352,69 @@ fn openings_are_open_and_walls_beside_them_are_solid() {
         }
     }
     assert!(solid >= l.portals.len(), "only {solid} solid checks");
+}
+
+/// The rooms are closed but for their openings: from the centre and the corners of every room's
+/// walkable box, a ray in any direction hits the building, or leaves its outline through a portal
+/// (maybe another room's, after a doorway).
+#[test]
+fn rooms_are_closed_but_for_their_portals() {
+    let l = layout();
+    let tris = triangles(scene(), true);
+    let n = 600;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let dirs: Vec<DVec3> = (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            let a = golden * i as f64;
+            DVec3::new(r * a.cos(), y, r * a.sin())
+        })
+        .collect();
+    let (bmin, bmax) = (v3(l.building_min).as_dvec3(), v3(l.building_max).as_dvec3());
+    let mut out = 0;
+    for room in &l.rooms {
+        let (lo, hi) = (v3(room.min).as_dvec3(), v3(room.max).as_dvec3());
+        let mut eyes = vec![0.5 * (lo + hi)];
+        for k in 0..8 {
+            eyes.push(DVec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            ));
+        }
+        for &o in &eyes {
+            for &d in &dirs {
+                if tris
+                    .iter()
+                    .any(|t| ray_hit(o, d, t).is_some_and(|t| t > 1e-6))
+                {
+                    continue;
+                }
+                // Where the ray leaves the building's outline, it must be inside an opening.
+                let exit = [(0, d.x), (2, d.z)]
+                    .into_iter()
+                    .filter(|&(_, v)| v != 0.0)
+                    .map(|(a, v)| {
+                        let face = if v > 0.0 { bmax[a] } else { bmin[a] };
+                        ((face - o[a]) / v, a, v.signum())
+                    })
+                    .min_by(|x, y| x.0.total_cmp(&y.0));
+                let Some((t, axis, sign)) = exit else {
+                    panic!("{}: vertical ray {d} escapes", room.name);
+                };
+                let q = o + d * t;
+                let through = l.portals.iter().any(|p| {
+                    let (c, w) = (v3(p.center).as_dvec3(), v3(p.outward).as_dvec3());
+                    let side = DVec3::new(w.z, 0.0, w.x);
+                    w[axis] == sign
+                        && (q - c).dot(side).abs() <= 0.5 * p.width as f64 + 1e-9
+                        && (q.y - c.y).abs() <= 0.5 * p.height as f64 + 1e-9
+                });
+                assert!(through, "{}: ray from {o} along {d} escapes", room.name);
+                out += 1;
+            }
+        }
+    }
+    assert!(out > 0, "no ray left through a portal");
 }
