@@ -200,8 +200,8 @@ pub fn describe() -> &'static str {
      \x20 terrain  fBm height field (0 at the origin) coloured by height and slope, with trees and \
      shrubs; about 42% of the triangles are ground at 4 m spacing.\n\
      \x20 forest   flat forest floor with spruce, pine, broadleaf, birch, poplar and shrubs, clearings.\n\
-     \x20 interior the city plus a two-storey building on the avenue east of the plaza \
-     (x 12 to 28.6 m, |z| < 7.3 m): four ground-floor rooms joined by doorways, with windows and a \
+     \x20 interior the city plus a two-storey building on the avenue 12 m east of the \
+     origin (x 12 to 28.6 m, |z| < 7.3 m): four ground-floor rooms joined by doorways, with windows and a \
      door to the street, for portal impostors.\n\
      All: metres, +Y up, ground height 0 at the origin, no plant or building within 5 m of it."
 }

@@ -1,6 +1,7 @@
 //! Procedural, seamlessly tiling RGBA8 sRGB textures for the built-in scenes: a facade with window
 //! bays, asphalt, cobblestones (a periodic Voronoi pattern, Worley 1996, "A cellular texture basis
-//! function"), grass, and a neutral detail texture for terrain and forest floor.
+//! function"), grass, wooden floor boards, and a neutral detail texture for terrain and forest
+//! floor.
 //!
 //! Textures do not depend on the scene seed: they are the same for every spec.
 
