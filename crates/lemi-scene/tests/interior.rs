@@ -418,3 +418,18 @@ fn rooms_are_closed_but_for_their_portals() {
     }
     assert!(out > 0, "no ray left through a portal");
 }
+
+#[test]
+fn the_building_shares_the_city_facade_texture() {
+    let s = scene();
+    let texture = |name: &str| {
+        let m = s.materials.iter().find(|m| m.name == name);
+        m.and_then(|m| m.texture)
+            .unwrap_or_else(|| panic!("{name}"))
+    };
+    assert_eq!(texture("interior-facade"), texture("city-facade"));
+    let floor = &s.textures[texture("interior-floor") as usize];
+    let distinct: std::collections::BTreeSet<&[u8]> = floor.rgba8.chunks(4).collect();
+    assert!(distinct.len() > 20, "flat floor texture");
+    assert_eq!(s.textures.len(), 5, "city's four and the floor boards");
+}

@@ -800,9 +800,18 @@ fn emit_roof(e: &mut Emitter) {
     }
 }
 
-/// Adds the building's materials and meshes to `b` (after the city's).
+/// Adds the building's materials and meshes to `b` (after the city's, whose facade texture it
+/// shares).
 pub fn build(b: &mut SceneBuilder) {
-    let facade = b.add_texture(textures::facade());
+    let city_facade = b
+        .materials()
+        .iter()
+        .find(|m| m.name == "city-facade")
+        .and_then(|m| m.texture);
+    let facade = match city_facade {
+        Some(t) => t,
+        None => b.add_texture(textures::facade()),
+    };
     let floor = b.add_texture(textures::planks());
     let white = [1.0, 1.0, 1.0, 1.0];
     let m = |name: &str, texture: Option<u32>| Material {
