@@ -10,7 +10,8 @@ use lemi_core::{Scene, UpAxis};
 #[derive(clap::Args, Debug, Clone)]
 pub struct SceneArgs {
     /// Scene inputs: files (.gltf .glb .obj .ply .ply.gz), directories (searched recursively), or
-    /// built-in scenes `builtin:NAME[:triangles[:seed]]` with NAME one of city, terrain, forest.
+    /// built-in scenes `builtin:NAME[:triangles[:seed]]` with NAME one of city, terrain, forest,
+    /// interior.
     #[arg(required = true, value_name = "SCENE")]
     pub scenes: Vec<String>,
     /// Up axis of the input files; lemi works in +Y up and converts Z-up data at import.

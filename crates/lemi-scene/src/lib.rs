@@ -2,8 +2,8 @@
 //!
 //! `SCENE` arguments are a file (`.gltf`, `.glb`, `.obj`, `.ply`, `.ply.gz`), a directory (every
 //! supported file below it, recursively) or a built-in spec `builtin:NAME[:triangles[:seed]]` with
-//! `NAME` one of `city`, `terrain`, `forest`. [`open_bundle`] opens a baked bundle with the scene it
-//! was baked from (checked against the bundle's scene fingerprint).
+//! `NAME` one of `city`, `terrain`, `forest`, `interior`. [`open_bundle`] opens a baked bundle with
+//! the scene it was baked from (checked against the bundle's scene fingerprint).
 
 pub mod builtin;
 mod bundle;

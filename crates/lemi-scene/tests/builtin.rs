@@ -351,6 +351,29 @@ fn draw_pictures() {
         raster(&s, &top, 1024, &dir.join(format!("{name}_top.png")));
         raster(&s, &persp, 1024, &dir.join(format!("{name}_eye.png")));
     }
+    // The interior: from the plaza towards the door, and from each room through its openings.
+    let spec = "interior:200k:1";
+    let s = build(spec);
+    let look = |eye: Vec3, f: Vec3| {
+        let r = f.cross(Vec3::Y);
+        move |p: Vec3| {
+            let d = p - eye;
+            let z = d.dot(f);
+            (z > 0.1).then(|| (d.dot(r) / z, -d.y / z, z))
+        }
+    };
+    let mut views = vec![("plaza".to_string(), Vec3::new(0.0, 1.7, -3.6), Vec3::X)];
+    if let Some(l) = builtin::interior_layout(&BuiltinSpec::parse(spec).expect("spec")) {
+        for (i, p) in l.portals.iter().enumerate() {
+            let room = &l.rooms[p.room];
+            let eye = 0.5 * (Vec3::from(room.min) + Vec3::from(room.max));
+            views.push((format!("{}_{i}", room.name), eye, Vec3::from(p.outward)));
+        }
+    }
+    for (what, eye, f) in views {
+        let path = dir.join(format!("interior_{what}.png"));
+        raster(&s, &look(eye, f), 768, &path);
+    }
 }
 
 fn raster(

@@ -189,14 +189,14 @@ fn sides(r: Rect) -> [Side; 4] {
 /// Facade `u` for a wall of length `len` at parameter `t` in `[0, 1]`: a whole number of window bays
 /// fits the wall, so windows never get cut at a corner.
 #[inline]
-fn facade_u(len: f32, t: f32) -> f32 {
+pub fn facade_u(len: f32, t: f32) -> f32 {
     let bays = (len / BAY + 0.5).floor().max(1.0);
     t * bays * BAY / FACADE_TILE
 }
 
 /// Facade `v`: metres above the street divided by the tile height (texture rows run downwards).
 #[inline]
-fn facade_v(y: f32) -> f32 {
+pub fn facade_v(y: f32) -> f32 {
     -y / FACADE_TILE
 }
 

@@ -1,6 +1,7 @@
-//! Built-in procedural scenes: `city`, `terrain`, `forest`, each deterministic from a seed and sized
-//! by a triangle budget (the budget sets the *extent*: a bigger city has more blocks, a bigger
-//! terrain or forest covers more ground).
+//! Built-in procedural scenes: `city`, `terrain`, `forest` and `interior` (the city plus a building
+//! with rooms to stand in, see [`interior`]), each deterministic from a seed and sized by a triangle
+//! budget (the budget sets the *extent*: a bigger city has more blocks, a bigger terrain or forest
+//! covers more ground).
 //!
 //! Spec grammar (the text after `builtin:`): `NAME[:triangles[:seed]]`, where `triangles` is a plain
 //! integer or a decimal with a `k` (thousand) or `M` (million) suffix (`200000`, `200k`, `1M`,
@@ -19,6 +20,7 @@
 mod city;
 mod forest;
 mod geom;
+pub mod interior;
 mod rng;
 mod terrain;
 mod textures;
@@ -29,6 +31,7 @@ use lemi_core::{Scene, SceneBuilder};
 use crate::SceneError;
 
 pub use city::{AVENUE_FREE_HALF_WIDTH, PLAZA_FREE_RADIUS};
+pub use interior::{interior_layout, InteriorLayout, Portal, PortalKind, Room};
 
 /// Triangle budget when the spec gives none.
 pub const DEFAULT_TRIANGLES: u64 = 200_000;
@@ -49,16 +52,24 @@ pub enum Builtin {
     City,
     Terrain,
     Forest,
+    /// The city with one building whose rooms look out on the avenue ([`interior`]).
+    Interior,
 }
 
 impl Builtin {
-    pub const ALL: [Builtin; 3] = [Builtin::City, Builtin::Terrain, Builtin::Forest];
+    pub const ALL: [Builtin; 4] = [
+        Builtin::City,
+        Builtin::Terrain,
+        Builtin::Forest,
+        Builtin::Interior,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             Builtin::City => "city",
             Builtin::Terrain => "terrain",
             Builtin::Forest => "forest",
+            Builtin::Interior => "interior",
         }
     }
 }
@@ -92,10 +103,15 @@ impl BuiltinSpec {
             "city" => Builtin::City,
             "terrain" => Builtin::Terrain,
             "forest" => Builtin::Forest,
-            "" => return Err(bad("missing scene name (city, terrain or forest)".into())),
+            "interior" => Builtin::Interior,
+            "" => {
+                return Err(bad(
+                    "missing scene name (city, terrain, forest or interior)".into(),
+                ))
+            }
             _ => {
                 return Err(bad(format!(
-                    "unknown scene `{name}` (expected city, terrain or forest)"
+                    "unknown scene `{name}` (expected city, terrain, forest or interior)"
                 )))
             }
         };
@@ -132,7 +148,8 @@ impl BuiltinSpec {
     }
 
     /// Eye position of a viewer standing at the origin: `(0, EYE_HEIGHT, 0)`. In the city this is
-    /// the middle of the free plaza on the main avenue; in terrain and forest it is a clearing.
+    /// the middle of the free plaza on the main avenue (in `interior` too, facing the building's
+    /// door 12 m to the east); in terrain and forest it is a clearing.
     pub fn spawn_eye(&self) -> [f32; 3] {
         [0.0, self.ground_height_at_origin() + EYE_HEIGHT, 0.0]
     }
@@ -183,6 +200,9 @@ pub fn describe() -> &'static str {
      \x20 terrain  fBm height field (0 at the origin) coloured by height and slope, with trees and \
      shrubs; about 42% of the triangles are ground at 4 m spacing.\n\
      \x20 forest   flat forest floor with spruce, pine, broadleaf, birch, poplar and shrubs, clearings.\n\
+     \x20 interior the city plus a two-storey building on the avenue 12 m east of the \
+     origin (x 12 to 28.6 m, |z| < 7.3 m): four ground-floor rooms joined by doorways, with windows and a \
+     door to the street, for portal impostors.\n\
      All: metres, +Y up, ground height 0 at the origin, no plant or building within 5 m of it."
 }
 
@@ -214,6 +234,10 @@ pub fn build_spec(spec: &BuiltinSpec) -> Result<Scene, SceneError> {
         }
         Builtin::Forest => {
             forest::build(spec.seed, spec.triangles, &mut b);
+        }
+        Builtin::Interior => {
+            city::build(spec.seed, spec.triangles, &mut b);
+            interior::build(&mut b);
         }
     }
     let scene = b.finish();

@@ -1,6 +1,7 @@
 //! Procedural, seamlessly tiling RGBA8 sRGB textures for the built-in scenes: a facade with window
 //! bays, asphalt, cobblestones (a periodic Voronoi pattern, Worley 1996, "A cellular texture basis
-//! function"), grass, and a neutral detail texture for terrain and forest floor.
+//! function"), grass, wooden floor boards, and a neutral detail texture for terrain and forest
+//! floor.
 //!
 //! Textures do not depend on the scene seed: they are the same for every spec.
 
@@ -161,5 +162,23 @@ pub fn detail() -> Texture {
     make("builtin-detail", N, |x, y| {
         let v = 214.0 + 26.0 * value(10, N, 16, x, y) + 12.0 * grain(11, x, y);
         [v, v, v].map(clamp8)
+    })
+}
+
+/// 128×128 wooden floor boards, 2 m square: 8 boards 0.25 m wide running along `u`, each with its
+/// own tone and one end joint per tile at its own place, dark gaps between boards, fine grain.
+/// Near-white so the vertex colour gives the wood its colour.
+pub fn planks() -> Texture {
+    const N: u32 = 128;
+    const BOARD: u32 = N / 8;
+    make("builtin-planks", N, |x, y| {
+        let board = (y / BOARD) as u64;
+        let key = hash(&[12, board]);
+        let joint = (unit_of(key) * N as f32) as u32;
+        let tone = 22.0 * (unit_of(key.rotate_left(32)) - 0.5);
+        let streak = 16.0 * value(13, N, 32, x / 8, y) + 6.0 * grain(14, x, y);
+        let gap = y % BOARD == 0 || x == joint;
+        let v = if gap { 120.0 } else { 206.0 + tone + streak };
+        [v + 8.0, v, v - 10.0].map(clamp8)
     })
 }
