@@ -1,4 +1,5 @@
-//! `lemi bake-object SCENE… -o BUNDLE --view-cell box:…|shaft:… [--object x0,y0,z0,x1,y1,z1]`:
+//! `lemi bake-object SCENE… -o BUNDLE --view-cell box:…|shaft:… [--object x0,y0,z0,x1,y1,z1]
+//! | --object-mesh NAME]`:
 //! bakes the layered impostor of one object for a box- or shaft-shaped view cell
 //! (TR-186-2-02-04 sec. 2.1-2.2; [`lemi_core::object_cell`], [`lemi_bake::object_bake`]). Without
 //! `--object` the whole scene is the object. The bundle holds one cell whose near list is
@@ -21,7 +22,7 @@ use lemi_gpu::{BackendChoice, Gpu};
 use serde_json::json;
 
 use crate::cmd_bake::{absolute_sources, alpha_of, human};
-use crate::load::{load_scene, SceneArgs, UpArg};
+use crate::load::{load_scene_with_report, SceneArgs, UpArg};
 
 /// Bake the layered impostor of one object for a box or shaft view cell.
 #[derive(clap::Args)]
@@ -35,6 +36,11 @@ pub struct Args {
     /// coordinates after --up). Default: the whole scene.
     #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true)]
     pub object: Option<Aabb>,
+    /// The object: the triangles of one scene input, named by its path as given, its file name
+    /// or its file name without extensions (`dragon` for `models/dragon.ply.gz`); with
+    /// --object, only those of its triangles whose centroid lies in that box.
+    #[arg(long, value_name = "NAME")]
+    pub object_mesh: Option<String>,
     /// The view cell: `box:x0,y0,z0,x1,y1,z1`, or `shaft:ax,ay,az,dx,dy,dz,angle_deg,min_distance`
     /// (apex, direction from the apex toward the viewer, full apex angle, the cell's distance
     /// from the apex).
@@ -64,10 +70,14 @@ pub struct Args {
     pub json: bool,
 }
 
-/// The triangles of `scene` whose centroid lies in `region` (all of them without one).
-fn select(scene: &Scene, region: Option<&Aabb>) -> Vec<TriRef> {
+/// The triangles of the meshes `meshes` of `scene` whose centroid lies in `region` (all of them
+/// without one).
+fn select(scene: &Scene, meshes: std::ops::Range<usize>, region: Option<&Aabb>) -> Vec<TriRef> {
     let mut out = Vec::new();
     for (m, mesh) in scene.meshes.iter().enumerate() {
+        if !meshes.contains(&m) {
+            continue;
+        }
         for t in 0..mesh.triangle_count() {
             let keep = match region {
                 None => true,
@@ -120,11 +130,38 @@ pub fn run(args: Args) -> Result<()> {
         scenes: sources.clone(),
         up: args.scene.up,
     };
-    let (scene, load_seconds) = load_scene(&scene_args, args.json)?;
-    let object = select(&scene, args.object.as_ref());
+    let (scene, report, load_seconds) = load_scene_with_report(&scene_args, args.json)?;
+    let meshes = match &args.object_mesh {
+        None => 0..scene.meshes.len(),
+        Some(name) => {
+            let parts: Vec<_> = report.parts.iter().filter(|p| p.is_named(name)).collect();
+            match parts[..] {
+                [part] => part.meshes.clone(),
+                [] => bail!(
+                    "--object-mesh: no scene input is named `{name}` (inputs: {})",
+                    report
+                        .parts
+                        .iter()
+                        .map(|p| p.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                _ => bail!(
+                    "--object-mesh: `{name}` names {} scene inputs ({}); give its path",
+                    parts.len(),
+                    parts
+                        .iter()
+                        .map(|p| p.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
+        }
+    };
+    let object = select(&scene, meshes, args.object.as_ref());
     if object.is_empty() {
         bail!(
-            "--object: no triangle of the scene has its centroid in the box {}",
+            "--object/--object-mesh: no triangle of the scene has its centroid in the box {}",
             args.object
                 .map(|b| format!("{:?} to {:?}", b.min.to_array(), b.max.to_array()))
                 .unwrap_or_default()

@@ -37,6 +37,14 @@ impl From<UpArg> for UpAxis {
 /// Loads the scene, showing a progress bar on stderr when it is a terminal; returns the scene and
 /// the load time in seconds.
 pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)> {
+    load_scene_with_report(args, quiet).map(|(scene, _, seconds)| (scene, seconds))
+}
+
+/// [`load_scene`], with the import's report (which meshes each input became).
+pub fn load_scene_with_report(
+    args: &SceneArgs,
+    quiet: bool,
+) -> anyhow::Result<(Scene, lemi_scene::import::ImportReport, f64)> {
     let (bar, progress) = progress_bar(quiet);
     let options = lemi_scene::LoadOptions {
         up: args.up.into(),
@@ -47,7 +55,7 @@ pub fn load_scene(args: &SceneArgs, quiet: bool) -> anyhow::Result<(Scene, f64)>
         .with_context(|| format!("loading {}", args.scenes.join(" ")))?;
     bar.finish_and_clear();
     print_warnings(&report);
-    Ok((scene, t.elapsed().as_secs_f64()))
+    Ok((scene, report, t.elapsed().as_secs_f64()))
 }
 
 /// The spinner of a scene load (hidden if `quiet`) and the progress callback that drives it.

@@ -149,5 +149,36 @@ fn bad_view_cells_and_objects_are_clear_errors_naming_the_flag() {
         &["--object", "no triangle"],
     );
     assert_clean_error_all(&run("1,2,nan,3,4,5", CELL), &["--object"]);
+    // --object-mesh names a scene input
+    let o = lemi(&[
+        "bake-object",
+        SCENE,
+        "-o",
+        b,
+        "--object-mesh",
+        "dragon",
+        "--view-cell",
+        CELL,
+    ]);
+    assert_clean_error_all(&o, &["--object-mesh", "dragon", SCENE]);
     assert!(!std::path::Path::new(b).join("manifest.json").exists());
+    let o = lemi(&[
+        "bake-object",
+        SCENE,
+        "-o",
+        b,
+        "--object-mesh",
+        SCENE,
+        "--object",
+        OBJECT,
+        "--view-cell",
+        CELL,
+        "--output-width",
+        "128",
+        "--resolution",
+        "64",
+        "--json",
+    ]);
+    let r = json(&o);
+    assert!(r["object_triangles"].as_u64().unwrap() > 100, "{r}");
 }

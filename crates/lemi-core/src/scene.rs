@@ -444,6 +444,11 @@ impl SceneBuilder {
         self.scene.stats.triangles
     }
 
+    /// Meshes so far.
+    pub fn mesh_count(&self) -> usize {
+        self.scene.meshes.len()
+    }
+
     /// Finishes the scene. Callers decide whether an empty scene is an error
     /// (`lemi-scene` reports it as one, naming the inputs).
     pub fn finish(self) -> Scene {

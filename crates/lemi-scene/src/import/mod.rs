@@ -33,6 +33,32 @@ pub struct ImportReport {
     pub missing_materials: u64,
     /// Textures that could not be read or decoded (their materials keep only the colour factor).
     pub missing_textures: u64,
+    /// Which meshes of the scene each input file (or `builtin:` spec) became, in load order:
+    /// what `lemi bake-object --object-mesh` selects an object by.
+    pub parts: Vec<ScenePart>,
+}
+
+/// The meshes one input file (or `builtin:` spec) of a scene became.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ScenePart {
+    /// The file's path (a file found in a directory input: its path below it), or the spec.
+    pub name: String,
+    /// Its meshes, a range of `Scene::meshes`.
+    pub meshes: std::ops::Range<usize>,
+}
+
+impl ScenePart {
+    /// Whether `name` names this part: its path as given, its file name, or its file name
+    /// without the extensions (`dragon` for `models/dragon.ply.gz`).
+    pub fn is_named(&self, name: &str) -> bool {
+        let path = Path::new(&self.name);
+        let file = path.file_name().map(|f| f.to_string_lossy().into_owned());
+        let stem = file
+            .as_deref()
+            .and_then(|f| f.split('.').next())
+            .map(str::to_owned);
+        self.name == name || file.as_deref() == Some(name) || stem.as_deref() == Some(name)
+    }
 }
 
 impl ImportReport {
@@ -84,7 +110,12 @@ pub fn load_with_report(
         if let Some(spec) = input.strip_prefix("builtin:") {
             progress(options, input, 0, 0);
             let scene = crate::builtin::build(spec)?;
+            let first = builder.mesh_count();
             builder.append_scene(scene);
+            report.parts.push(ScenePart {
+                name: input.clone(),
+                meshes: first..builder.mesh_count(),
+            });
             continue;
         }
         let path = PathBuf::from(input);
@@ -103,7 +134,12 @@ pub fn load_with_report(
         let total = files.len() as u64;
         for (i, file) in files.iter().enumerate() {
             progress(options, &file.display().to_string(), i as u64, total);
+            let first = builder.mesh_count();
             load_file(file, options, &mut builder, &mut report)?;
+            report.parts.push(ScenePart {
+                name: file.display().to_string(),
+                meshes: first..builder.mesh_count(),
+            });
         }
     }
     let scene = builder.finish();
