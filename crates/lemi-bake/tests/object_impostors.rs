@@ -151,21 +151,7 @@ fn bake(gpu: &Gpu, scene: &Scene, cell: ObjectViewCell) -> (ObjectSetup, ObjectB
     let setup = ObjectSetup::new(cell, object_bounds(scene, &object), Some(RES), alpha())
         .expect("object setup");
     let placement = setup.place().expect("placement");
-    let base = BakeParams {
-        cell_size: 1.0,
-        cell_height: None,
-        resolution: RES,
-        target: LayerTarget::Layers(1),
-        faces: vec![Face::PosZ],
-        alpha: alpha(),
-        output_fov_deg: Some(FOV_X),
-        output_width: Some(WIDTH),
-        micro_grid: 8,
-        micro_threshold: 0.6,
-        layering: Default::default(),
-        texture_format: Default::default(),
-    };
-    let params = object_params(&setup, placement.layers.len(), &base);
+    let params = object_params(&setup, placement.layers.len(), &scene_params());
     let baked = bake_object(gpu, scene, &object, &setup, params.clone(), |_| {}).expect("bake");
     (setup, baked, params)
 }
@@ -318,18 +304,8 @@ fn object_bundles_round_trip_and_serve_only_their_view_cell() {
         ObjectSetup::new(cell, object_bounds(&scene, &object), Some(128), alpha()).expect("setup");
     let placement = setup.place().expect("placement");
     let base = BakeParams {
-        cell_size: 1.0,
-        cell_height: None,
         resolution: 128,
-        target: LayerTarget::Layers(1),
-        faces: vec![Face::PosZ],
-        alpha: alpha(),
-        output_fov_deg: Some(FOV_X),
-        output_width: Some(WIDTH),
-        micro_grid: 8,
-        micro_threshold: 0.6,
-        layering: Default::default(),
-        texture_format: Default::default(),
+        ..scene_params()
     };
     let params = object_params(&setup, placement.layers.len(), &base);
     let mut baked =
@@ -374,5 +350,131 @@ fn object_bundles_round_trip_and_serve_only_their_view_cell() {
                 .contains("outside the object impostor's view cell"),
             "{e}"
         );
+    }
+}
+
+#[test]
+fn an_object_impostor_replaces_its_object_in_a_cells_near_field() {
+    use lemi_core::cell::ViewCell;
+    use lemi_core::object_cell::compose_objects;
+    let _guard = serial();
+    let Some(gpu) = gpu() else { return };
+    // an environment-map cell with few layers (a wide near field), a ball inside that near field
+    // and a far strip in its layers
+    let cell = ViewCell {
+        index: glam::IVec3::ZERO,
+        center: DVec3::new(0.0, 2.0, 0.0),
+        half: DVec3::new(3.0, 1.0, 3.0),
+    };
+    let env_params = BakeParams {
+        cell_size: 6.0,
+        cell_height: Some(2.0),
+        resolution: RES,
+        target: LayerTarget::Layers(3),
+        faces: Face::HORIZONTAL.to_vec(),
+        alpha: alpha(),
+        output_fov_deg: Some(FOV_X),
+        output_width: Some(WIDTH),
+        micro_grid: 8,
+        micro_threshold: 0.6,
+        layering: Default::default(),
+        texture_format: Default::default(),
+    };
+    let probe = scene(vec![ball(DVec3::new(30.0, 3.0, 1.0), 4.0)]);
+    let near_field = lemi_bake::Baker::new(&gpu, &probe, env_params.clone())
+        .expect("baker")
+        .plan(&cell)
+        .expect("plan")
+        .near_field;
+    let c = DVec3::new(0.5 * near_field, 3.0, 1.0);
+    let radius = 0.15 * c.x;
+    assert!(c.x - radius > cell.half.x, "the ball lies outside the cell");
+    let scene = scene(vec![
+        ball(c, radius),
+        strip(near_field + 5.0, near_field + 80.0),
+    ]);
+    let env = lemi_bake::Baker::new(&gpu, &scene, env_params)
+        .expect("baker")
+        .bake(&cell, |_| {})
+        .expect("env bake");
+    let ball_tris = scene.meshes[0].triangle_count();
+    assert!(
+        env.near.iter().filter(|t| t[0] == 0).count() == ball_tris,
+        "the ball is in the cell's near field"
+    );
+    // the ball's impostor for the cell's box
+    let object: Vec<TriRef> = all_triangles(&scene)
+        .into_iter()
+        .filter(|r| r.mesh == 0)
+        .collect();
+    let view_cell = ObjectViewCell::Box {
+        min: cell.center - cell.half,
+        max: cell.center + cell.half,
+    };
+    let setup = ObjectSetup::new(
+        view_cell,
+        object_bounds(&scene, &object),
+        Some(RES),
+        alpha(),
+    )
+    .expect("setup");
+    let placement = setup.place().expect("placement");
+    let params = object_params(&setup, placement.layers.len(), &scene_params());
+    let obj = bake_object(&gpu, &scene, &object, &setup, params, |_| {}).expect("object bake");
+    let (composed, n) = compose_objects(&env, &[&obj.file]).expect("compose");
+    assert_eq!(n, 1);
+    assert_eq!(composed.near.len(), env.near.len() - ball_tris);
+    assert_eq!(
+        composed.header.quads.len(),
+        env.header.quads.len() + obj.file.header.quads.len()
+    );
+    // composed with an object that is not in the near field: nothing changes
+    let (same, none) = compose_objects(&composed, &[&obj.file]).expect("compose again");
+    assert_eq!((none, same.near.len()), (0, composed.near.len()));
+    // the composed cell shows the ball without cracks from the cell's corners and edges
+    let materials =
+        Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("materials"));
+    let full = GpuScene::upload(&gpu, &scene, &UploadOptions::default()).expect("scene");
+    let drawn = ImpostorCell::upload_file(&gpu, materials, &scene, &composed).expect("cell");
+    let reference = Renderer::new(&gpu).expect("renderer");
+    let impostors = ImpostorRenderer::new(&gpu).expect("impostor renderer");
+    let options = RenderOptions {
+        clear: CLEAR,
+        ..Default::default()
+    };
+    let (mut judged, mut found) = (0, 0);
+    for (label, eye) in view_cell.eval_viewpoints(2, 3) {
+        if label.starts_with("face") {
+            continue;
+        }
+        let v = view(eye, c);
+        let r = reference.render(&full, &v, &options).expect("reference");
+        let i = impostors.render(&drawn, &v, &options).expect("impostor");
+        let (j, k) = cracks(&r, &i);
+        judged += j;
+        found += k;
+    }
+    assert!(
+        judged > 10_000,
+        "{judged} judged pixels, near field {near_field}, ball at {c} radius {radius}"
+    );
+    assert_eq!(found, 0, "{found} crack pixels");
+}
+
+/// The object bake parameters of these tests, before [`object_params`].
+fn scene_params() -> BakeParams {
+    BakeParams {
+        cell_size: 1.0,
+        cell_height: None,
+        resolution: RES,
+        target: LayerTarget::Layers(1),
+        faces: vec![Face::PosZ],
+        alpha: alpha(),
+        output_fov_deg: Some(FOV_X),
+        output_width: Some(WIDTH),
+        micro_grid: 8,
+        micro_threshold: 0.6,
+        layering: Default::default(),
+        texture_format: Default::default(),
     }
 }

@@ -146,5 +146,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         json: false,
         compare: true,
         scene_override: Vec::new(),
+        with_object: Vec::new(),
     })
 }

@@ -79,6 +79,11 @@ pub struct Args {
     /// checked against the bundle's fingerprint).
     #[arg(long = "scene", value_name = "SCENE")]
     pub scene_override: Vec<String>,
+    /// With a BUNDLE: an object bundle (`lemi bake-object`, baked from the same scene) whose
+    /// impostor replaces its object in the cell's near geometry while the eye lies in its view
+    /// cell (repeatable).
+    #[arg(long = "with-object", value_name = "OBJECT_BUNDLE")]
+    pub with_object: Vec<PathBuf>,
 }
 
 fn parse_numbers(s: &str, n: usize) -> Result<Vec<f64>, String> {
@@ -286,6 +291,7 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
     let (cell, file) = opened
         .cell_at(cam.eye)
         .context("the eye must lie in a baked cell")?;
+    let (file, objects) = with_objects(&opened, file, &args.with_object, cam.eye)?;
     let gpu = Gpu::new(backend)?;
     let t = Instant::now();
     let materials = std::sync::Arc::new(
@@ -331,6 +337,7 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
             "bundle": bundle,
             "cell": cell.id(),
             "adapter": gpu.info().name,
+            "objects": objects,
             "near_triangles": impostor_cell.near_triangles(),
             "quads": impostor_cell.quad_count(),
             "texture_bytes": impostor_cell.texture_bytes(),
@@ -356,6 +363,12 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("adapter    {}", gpu.describe());
+    if !args.with_object.is_empty() {
+        println!(
+            "objects    {objects} of {} object impostors replace their objects here",
+            args.with_object.len()
+        );
+    }
     println!(
         "cell       {} of {}: {} near triangles, {} impostor quads, {:.1} MB of macro-textures",
         cell.id(),
@@ -397,6 +410,42 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
         }
     );
     Ok(())
+}
+
+/// The cell `file` of `opened` composed with the object bundles `paths` whose view cell holds
+/// `eye` (`lemi_core::object_cell::compose_objects`), and how many were composed. Each object
+/// bundle must be an object bundle baked from the same scene.
+fn with_objects(
+    opened: &lemi_core::bundle::Bundle,
+    file: lemi_core::bundle::CellFile,
+    paths: &[PathBuf],
+    eye: DVec3,
+) -> anyhow::Result<(lemi_core::bundle::CellFile, usize)> {
+    if paths.is_empty() {
+        return Ok((file, 0));
+    }
+    let mut cells = Vec::new();
+    for path in paths {
+        let b = lemi_core::bundle::Bundle::open(path)
+            .with_context(|| format!("--with-object {}", path.display()))?;
+        let Some(o) = &b.manifest().object else {
+            bail!(
+                "--with-object {}: not an object bundle (bake it with lemi bake-object)",
+                path.display()
+            );
+        };
+        b.expect_scene(&opened.manifest().scene.fingerprint)
+            .with_context(|| format!("--with-object {}", path.display()))?;
+        if o.cell.contains(eye) {
+            let (_, f) = b
+                .cell_at(eye)
+                .with_context(|| format!("--with-object {}", path.display()))?;
+            cells.push(f);
+        }
+    }
+    let refs: Vec<&lemi_core::bundle::CellFile> = cells.iter().collect();
+    lemi_core::object_cell::compose_objects(&file, &refs)
+        .map_err(|e| anyhow::anyhow!("--with-object: {e}"))
 }
 
 /// `lemi render OBJECT_BUNDLE` from outside the object impostor's view cell: the impostor's

@@ -81,6 +81,41 @@ fn an_object_bakes_renders_inside_and_outside_and_is_certified() {
         "{outside}"
     );
 
+    // --with-object takes object bundles only, onto a cell bundle
+    let o = lemi(&[
+        "render",
+        b,
+        "--eye",
+        "41,1.5,-4",
+        "--look",
+        "200,10,0",
+        "--size",
+        "160x90",
+        "-o",
+        png.to_str().unwrap(),
+        "--with-object",
+        "/nonexistent-object-bundle",
+    ]);
+    assert_clean_error_all(&o, &["--with-object", "/nonexistent-object-bundle"]);
+    let o = lemi(&[
+        "render",
+        b,
+        "--eye",
+        "41,1.5,-4",
+        "--look",
+        "200,10,0",
+        "--size",
+        "160x90",
+        "-o",
+        png.to_str().unwrap(),
+        "--with-object",
+        b,
+    ]);
+    assert_clean_error_all(
+        &o,
+        &["--with-object", "cannot take further object impostors"],
+    );
+
     // the certificate, with the same gates as cell bundles
     let e = lemi(&[
         "eval",

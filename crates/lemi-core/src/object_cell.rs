@@ -623,6 +623,60 @@ pub fn complement(scene: &Scene, object: &[TriRef]) -> Vec<[u32; 2]> {
     out
 }
 
+/// A cell as drawn from a viewpoint with object impostors (GI 2002's near field, TR sec. 3): each
+/// of `objects` (an object bundle's cell file) whose object has triangles in `base`'s near list
+/// replaces them: they leave the near list, its quads and macro-textures join `base`'s (macro
+/// indices renumbered). The caller passes only the objects whose view cell holds the viewpoint
+/// (outside it an object stays geometry). Quads carry world corners, so the result draws as one
+/// cell; its layers and faces stay `base`'s (the objects' quads keep their own layer numbers,
+/// which order them within their draw calls only). Errors when an object's texture format
+/// differs from `base`'s, or `base` is itself an object cell. Returns the composed cell and how
+/// many objects were composed.
+pub fn compose_objects(
+    base: &crate::bundle::CellFile,
+    objects: &[&crate::bundle::CellFile],
+) -> Result<(crate::bundle::CellFile, usize), String> {
+    if base.header.object.is_some() {
+        return Err("an object bundle's cell cannot take further object impostors".into());
+    }
+    let mut out = base.clone();
+    let mut composed = 0;
+    for (k, o) in objects.iter().enumerate() {
+        if o.header.object.is_none() {
+            return Err(format!("object {k}: not an object impostor's cell"));
+        }
+        if o.header.texture_format != base.header.texture_format {
+            return Err(format!(
+                "object {k}: its textures are {}, the cell's {} (bake both with the same --texture-format)",
+                o.header.texture_format, base.header.texture_format
+            ));
+        }
+        // the object's triangles are those its cell does not draw as geometry
+        let drawn: std::collections::HashSet<[u32; 2]> = o.near.iter().copied().collect();
+        let before = out.near.len();
+        out.near.retain(|t| drawn.contains(t));
+        if out.near.len() == before {
+            // the object is not in this cell's near field: the layers already show it
+            continue;
+        }
+        composed += 1;
+        let offset = out.header.macros.len() as u32;
+        for (i, (m, blob)) in o.header.macros.iter().zip(&o.macro_blobs).enumerate() {
+            let mut m = m.clone();
+            m.name = format!("object{k}-{i}-{}", m.name);
+            out.header.macros.push(m);
+            out.macro_blobs.push(blob.clone());
+        }
+        out.header
+            .quads
+            .extend(o.header.quads.iter().map(|q| crate::bundle::Quad {
+                macro_index: q.macro_index + offset,
+                ..*q
+            }));
+    }
+    Ok((out, composed))
+}
+
 /// The 8 corners of a box.
 pub fn box_corners(b: &Aabb) -> [DVec3; 8] {
     std::array::from_fn(|k| {
