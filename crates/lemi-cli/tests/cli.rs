@@ -300,7 +300,7 @@ fn layers_object_mode_plots_fig12() {
     let labels: Vec<&str> = doc
         .descendants()
         .filter(|n| n.has_tag_name("text"))
-        .filter_map(|n| n.text())
+        .filter_map(|n| n.text().map(str::trim))
         .collect();
     for name in [
         "256 px",
