@@ -462,6 +462,10 @@ where
         .map_err(err)?;
     chart
         .configure_mesh()
+        .x_labels(12)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
+        .light_line_style(WHITE.mix(0.0))
         .x_desc("distance from the view cell to the object (m, log scale)")
         .y_desc("layers")
         .draw()
