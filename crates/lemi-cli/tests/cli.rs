@@ -243,8 +243,8 @@ fn layers_object_mode_matches_the_placement_at_the_tr_distances() {
         );
         assert!(row[0] > row[5], "{row:?}");
     }
-    for k in 0..TR_DISTANCES.len() {
-        assert!(counts[0][k] <= counts[1][k] && counts[1][k] <= counts[2][k]);
+    for ((a, b), c) in counts[0].iter().zip(&counts[1]).zip(&counts[2]) {
+        assert!(a <= b && b <= c, "grows with the output width: {counts:?}");
     }
     assert!(
         counts[0][0] < counts[1][0] && counts[1][0] < counts[2][0],
