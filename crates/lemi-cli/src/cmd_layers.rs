@@ -1,6 +1,8 @@
 //! `lemi layers`: the layer placement of a cubic view cell (the error metric of GI 2002 sec. 4.2
 //! and TR-186-2-02-04 sec. 2.1), as a table or JSON, optionally with a plot of the layer count
-//! versus distance and view-cell size (TR Fig. 12).
+//! versus distance and view-cell size (TR Fig. 12). With `--object-distance` it places the layers
+//! of one object seen from a box or shaft view cell instead (TR sec. 2.1.1-2.1.2, the object mode
+//! in [`crate::layers_object`]).
 
 use anyhow::{bail, Context, Result};
 use lemi_core::placement::{
@@ -11,28 +13,55 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// Default output view when neither `--alpha-deg` nor `--output-fov`/`--output-width` is given.
-const DEFAULT_FOV_DEG: f64 = 60.0;
+pub(crate) const DEFAULT_FOV_DEG: f64 = 60.0;
 const DEFAULT_WIDTH: u32 = 1280;
 
-/// Compute where the impostor layers and borders of a cubic view cell go.
+/// Compute where the impostor layers and borders of a cubic view cell go, or (with
+/// `--object-distance`) of one object seen from a box or shaft view cell.
 ///
 /// α (the allowed parallax angle) is the angle of one output pixel: by default the edge pixel of a
 /// 60° wide, 1280 px output view (about 0.0388°).
 #[derive(clap::Args)]
-#[command(group(clap::ArgGroup::new("target").required(true).args(["layers", "near_field"])))]
+#[command(group(clap::ArgGroup::new("target").required(true)
+    .args(["layers", "near_field", "object_distance"])))]
+#[command(group(clap::ArgGroup::new("object").multiple(true)
+    .args(["object_distance", "object_size", "object_depth", "shaft_angle"])))]
 pub struct Args {
-    /// Side length of the cubic view cell in metres.
+    /// Side length of the cubic view cell in metres (object mode: the box cell's side, or the
+    /// width of a shaft cell's near border).
     #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true)]
-    cell: f64,
-    /// Texels per side of each cube face (Res).
-    #[arg(long, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(1..))]
-    resolution: u32,
+    pub(crate) cell: f64,
+    /// Texels per side of each cube face (Res); in object mode texels across the impostor
+    /// (default there: Schaufler's rule, as `lemi bake-object`).
+    #[arg(long, value_name = "TEXELS", value_parser = clap::value_parser!(u32).range(1..),
+          required_unless_present = "object_distance")]
+    pub(crate) resolution: Option<u32>,
     /// Number of layers; prints the resulting near field.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_LAYERS as i64))]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=MAX_LAYERS as i64),
+          conflicts_with = "object")]
     layers: Option<u32>,
     /// Near-field distance from the cell centre (m); prints the fewest layers that reach it.
-    #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true)]
+    #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true,
+          conflicts_with = "object")]
     near_field: Option<f64>,
+    /// Object mode: distance (m) from the view cell's near border (the side facing the object) to
+    /// the object's near side, along the view axis.
+    #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true,
+          requires = "object_size")]
+    pub(crate) object_distance: Option<f64>,
+    /// Object mode: width and height (m) of the object's near face, centred on the view axis.
+    #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true,
+          requires = "object_distance")]
+    pub(crate) object_size: Option<f64>,
+    /// Object mode: the object's extent along the view axis (m); default its width.
+    #[arg(long, value_name = "METRES", value_parser = positive_finite, allow_negative_numbers = true,
+          requires = "object_distance")]
+    pub(crate) object_depth: Option<f64>,
+    /// Object mode: a shaft view cell with this full apex angle (degrees, 0 < angle < 180) whose
+    /// near border is --cell wide, instead of a box.
+    #[arg(long, value_name = "DEG", value_parser = shaft_angle, allow_negative_numbers = true,
+          requires = "object_distance")]
+    pub(crate) shaft_angle: Option<f64>,
     /// Allowed parallax angle α in degrees (0 < α < 90).
     #[arg(long, value_name = "DEG", value_parser = positive_finite, allow_negative_numbers = true,
           conflicts_with_all = ["output_fov", "output_width"])]
@@ -48,14 +77,15 @@ pub struct Args {
     #[arg(long, value_enum, default_value_t = PixelArg::Edge, conflicts_with = "alpha_deg")]
     alpha_pixel: PixelArg,
     /// The 2D case: the viewer moves in a horizontal square (the four horizontal faces).
-    #[arg(long = "2d")]
+    #[arg(long = "2d", conflicts_with = "object")]
     two_d: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
-    json: bool,
-    /// Also draw the layer count versus distance, view-cell size and resolution (SVG).
+    pub(crate) json: bool,
+    /// Also draw the layer count versus distance, view-cell size and resolution (SVG); in object
+    /// mode versus object distance for 256, 512 and 1024 px output views and versus cell size.
     #[arg(long, value_name = "FILE.svg")]
-    plot: Option<PathBuf>,
+    pub(crate) plot: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -75,18 +105,52 @@ fn positive_finite(s: &str) -> std::result::Result<f64, String> {
     Ok(v)
 }
 
+fn shaft_angle(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number"))?;
+    if !(v.is_finite() && v > 0.0 && v < 180.0) {
+        return Err(format!(
+            "the shaft's apex angle must be more than 0° and less than 180°, got {s}"
+        ));
+    }
+    Ok(v)
+}
+
 /// Where α came from, for the report.
 #[derive(Serialize)]
-struct AlphaSource {
-    alpha_deg: f64,
+pub(crate) struct AlphaSource {
+    pub(crate) alpha_deg: f64,
     /// `explicit`, or the output view it was derived from.
-    source: &'static str,
+    pub(crate) source: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
-    output_fov_deg: Option<f64>,
+    pub(crate) output_fov_deg: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    output_width: Option<u32>,
+    pub(crate) output_width: Option<u32>,
     #[serde(skip_serializing_if = "Option::is_none")]
-    pixel: Option<&'static str>,
+    pub(crate) pixel: Option<&'static str>,
+}
+
+impl AlphaSource {
+    /// The output pixel α refers to (edge unless `--alpha-pixel centre`).
+    pub(crate) fn pixel_choice(&self) -> PixelChoice {
+        match self.pixel {
+            Some("centre") => PixelChoice::Centre,
+            _ => PixelChoice::Edge,
+        }
+    }
+
+    /// α as one line of a table.
+    pub(crate) fn describe(&self) -> String {
+        match (self.output_fov_deg, self.output_width, self.pixel) {
+            (Some(f), Some(w), Some(px)) => format!(
+                "α = {:.5}° ({px} pixel of a {f}° × {w} px output view, {})",
+                self.alpha_deg, self.source
+            ),
+            _ => format!("α = {:.5}° (explicit)", self.alpha_deg),
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -102,7 +166,15 @@ struct Report<'a> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let dim = if args.two_d { Dim::Two } else { Dim::Three };
+    let (alpha, source) = alpha_of(&args)?;
+    if args.object_distance.is_some() {
+        return crate::layers_object::run(&args, alpha, source);
+    }
+    run_env(args, alpha, source)
+}
+
+/// α and where it came from: `--alpha-deg`, or one pixel of the output view.
+fn alpha_of(args: &Args) -> Result<(f64, AlphaSource)> {
     let pixel = match args.alpha_pixel {
         PixelArg::Edge => PixelChoice::Edge,
         PixelArg::Centre => PixelChoice::Centre,
@@ -151,23 +223,31 @@ pub fn run(args: Args) -> Result<()> {
             )
         }
     };
+    Ok((alpha, source))
+}
 
+/// The environment-map placement of a cubic cell (GI 2002 sec. 4.2).
+fn run_env(args: Args, alpha: f64, source: AlphaSource) -> Result<()> {
+    let dim = if args.two_d { Dim::Two } else { Dim::Three };
+    let Some(resolution) = args.resolution else {
+        bail!("--resolution is required for the environment-map placement (without --object-distance)");
+    };
     let mut warnings = Vec::new();
     if let (Some(fov), Some(width)) = (source.output_fov_deg, source.output_width) {
         let need = min_face_res_for_output_view(fov.to_radians(), width)
             .context("--output-fov/--output-width")?;
-        if args.resolution < need {
+        if resolution < need {
             warnings.push(format!(
                 "--resolution {} is too low for a {fov}° × {width} px output view: layer texels \
                  are magnified on screen (a face needs ≥ {need} texels for one texel ≤ one pixel), \
                  so the one-pixel guarantee is only nominal",
-                args.resolution
+                resolution
             ));
         }
     }
 
     let half = args.cell / 2.0;
-    let params = EnvParams::cube(half, args.resolution, alpha, dim);
+    let params = EnvParams::cube(half, resolution, alpha, dim);
     let target = match (args.layers, args.near_field) {
         (Some(n), None) => Target::Layers(n as usize),
         (None, Some(d)) => {
@@ -198,7 +278,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.json {
         let report = Report {
             cell: args.cell,
-            resolution: args.resolution,
+            resolution,
             dim: dim_name,
             alpha: source,
             near_field: placement.near_field,
@@ -208,11 +288,11 @@ pub fn run(args: Args) -> Result<()> {
         };
         return emit(&(serde_json::to_string_pretty(&report)? + "\n"));
     }
-    emit(&table(&args, dim_name, &source, &placement))
+    emit(&table(&args, resolution, dim_name, &source, &placement))
 }
 
 /// Writes to stdout; a closed pipe (`lemi layers … | head`) is not an error.
-fn emit(text: &str) -> Result<()> {
+pub(crate) fn emit(text: &str) -> Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
@@ -221,22 +301,15 @@ fn emit(text: &str) -> Result<()> {
     }
 }
 
-fn table(args: &Args, dim: &str, source: &AlphaSource, p: &Placement) -> String {
+fn table(args: &Args, resolution: u32, dim: &str, source: &AlphaSource, p: &Placement) -> String {
     use std::fmt::Write;
     let mut o = String::new();
-    let alpha = match (source.output_fov_deg, source.output_width, source.pixel) {
-        (Some(f), Some(w), Some(px)) => format!(
-            "α = {:.5}° ({px} pixel of a {f}° × {w} px output view, {})",
-            source.alpha_deg, source.source
-        ),
-        _ => format!("α = {:.5}° (explicit)", source.alpha_deg),
-    };
     let _ = writeln!(
         o,
         "view cell {} m, Res {}, {}, {dim}: {} layers",
         args.cell,
-        args.resolution,
-        alpha,
+        resolution,
+        source.describe(),
         p.layers.len()
     );
     let _ = writeln!(
@@ -347,7 +420,7 @@ fn plot(path: &Path, params: &EnvParams, placement: &Placement, src: &AlphaSourc
     Ok(())
 }
 
-fn draw_panel<DB: plotters::prelude::DrawingBackend>(
+pub(crate) fn draw_panel<DB: plotters::prelude::DrawingBackend>(
     area: &plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     title: &str,
     xlabel: &str,

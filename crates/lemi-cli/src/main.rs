@@ -14,6 +14,7 @@ mod cmd_render;
 mod cmd_serve;
 mod cmd_view;
 mod cmd_walk;
+mod layers_object;
 mod load;
 mod strategy;
 mod web;

@@ -126,6 +126,315 @@ fn layers_reproduces_the_paper_and_rejects_bad_parameters() {
     );
 }
 
+/// The TR's Fig. 11 distances (m from the view cell to the dragon).
+const TR_DISTANCES: [f64; 6] = [42.0, 59.0, 96.0, 142.0, 209.0, 563.0];
+
+/// The TR's Fig. 11 setting as `lemi layers` object-mode flags: a 20 m object (20 m deep) at
+/// `distance` from a 10 m cubic cell, α = the edge pixel of a 60° output view `width` px wide.
+fn object_layers_json(distance: f64, width: u32, extra: &[&str]) -> serde_json::Value {
+    let (d, w) = (distance.to_string(), width.to_string());
+    let mut args = vec![
+        "layers",
+        "--object-distance",
+        &d,
+        "--object-size",
+        "20",
+        "--object-depth",
+        "20",
+        "--cell",
+        "10",
+        "--output-fov",
+        "60",
+        "--output-width",
+        &w,
+        "--json",
+    ];
+    args.extend(extra);
+    let o = lemi(&args);
+    assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// The placement `lemi bake-object` would make for the same cell and object, computed here
+/// through the library: a box `[-5, 5]³` (or a shaft on its +X face) and the object beyond +X.
+fn object_placement_in_process(
+    distance: f64,
+    width: u32,
+    shaft_angle_deg: Option<f64>,
+) -> (lemi_core::object_cell::ObjectSetup, usize) {
+    use glam::DVec3;
+    use lemi_core::object_cell::{ObjectSetup, ObjectViewCell};
+    use lemi_core::placement::{alpha_from_output_view, place_object_layers, PixelChoice};
+    let alpha =
+        alpha_from_output_view(60f64.to_radians(), width, PixelChoice::Edge).expect("alpha");
+    let object = lemi_core::Aabb::new(
+        DVec3::new(5.0 + distance, -10.0, -10.0),
+        DVec3::new(25.0 + distance, 10.0, 10.0),
+    );
+    let cell = match shaft_angle_deg {
+        None => ObjectViewCell::Box {
+            min: DVec3::splat(-5.0),
+            max: DVec3::splat(5.0),
+        },
+        Some(a) => {
+            let apex = 5.0 / (a.to_radians() / 2.0).tan();
+            ObjectViewCell::Shaft {
+                apex: DVec3::new(5.0 + apex, 0.0, 0.0),
+                dir: DVec3::NEG_X,
+                angle_deg: a,
+                min_distance: apex,
+            }
+        }
+    };
+    let setup = ObjectSetup::new(cell, object, None, alpha).expect("setup");
+    let n = place_object_layers(&setup.params)
+        .expect("placement")
+        .layers
+        .len();
+    (setup, n)
+}
+
+#[test]
+fn layers_object_mode_matches_the_placement_at_the_tr_distances() {
+    let mut counts = Vec::new();
+    for width in [256u32, 512, 1024] {
+        let mut row = Vec::new();
+        for d in TR_DISTANCES {
+            let v = object_layers_json(d, width, &[]);
+            let (setup, n) = object_placement_in_process(d, width, None);
+            assert_eq!(v["mode"], "object");
+            assert_eq!(v["cell"]["kind"], "box");
+            assert_eq!(
+                v["layer_count"].as_u64().unwrap() as usize,
+                n,
+                "{width} px, {d} m"
+            );
+            let layers = v["layers"].as_array().unwrap();
+            assert_eq!(layers.len(), n);
+            assert_eq!(
+                v["resolution"].as_u64().unwrap(),
+                u64::from(setup.params.res)
+            );
+            assert_eq!(v["resolution_source"], "schaufler");
+            assert_eq!(
+                v["s"].as_f64().unwrap(),
+                5.0,
+                "s = m/2 (object wider than the cell)"
+            );
+            assert!((v["t0"].as_f64().unwrap() - d).abs() < 1e-9);
+            for k in ["distance", "near_border", "far_border", "bound_by"] {
+                assert!(layers[0].get(k).is_some(), "layer field {k}");
+            }
+            // near to far, the last ending at the object's far side
+            let far = layers.last().unwrap()["far_border"].as_f64().unwrap();
+            assert!((far - (d + 20.0)).abs() < 1e-6, "{far}");
+            row.push(n);
+        }
+        counts.push(row);
+    }
+    // The counts docs/PLACEMENT.md quotes (section "Trends").
+    assert_eq!(counts[0], [14, 7, 3, 1, 1, 1], "256 px");
+    assert_eq!(counts[1], [28, 15, 6, 3, 1, 1], "512 px");
+    assert_eq!(counts[2], [56, 30, 12, 6, 3, 1], "1024 px");
+    for row in &counts {
+        assert!(
+            row.windows(2).all(|w| w[0] >= w[1]),
+            "falls with distance: {row:?}"
+        );
+        assert!(row[0] > row[5], "{row:?}");
+    }
+    for ((a, b), c) in counts[0].iter().zip(&counts[1]).zip(&counts[2]) {
+        assert!(a <= b && b <= c, "grows with the output width: {counts:?}");
+    }
+    assert!(
+        counts[0][0] < counts[1][0] && counts[1][0] < counts[2][0],
+        "{counts:?}"
+    );
+
+    // An explicit resolution is used as given.
+    let v = object_layers_json(42.0, 1024, &["--resolution", "512"]);
+    assert_eq!(v["resolution"], 512);
+    assert_eq!(v["resolution_source"], "explicit");
+
+    // A shaft whose near border is the box's +X face.
+    let v = object_layers_json(96.0, 1024, &["--shaft-angle", "30"]);
+    let (setup, n) = object_placement_in_process(96.0, 1024, Some(30.0));
+    assert_eq!(v["cell"]["kind"], "shaft");
+    assert_eq!(v["layer_count"].as_u64().unwrap() as usize, n);
+    assert_eq!(v["s"].as_f64().unwrap(), setup.params.s);
+    assert!(v["cell"]["view_cell"]
+        .as_str()
+        .unwrap()
+        .starts_with("shaft:"));
+
+    // The table names the same count.
+    let o = lemi(&[
+        "layers",
+        "--object-distance",
+        "42",
+        "--object-size",
+        "20",
+        "--cell",
+        "10",
+        "--output-fov",
+        "60",
+        "--output-width",
+        "1024",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains(": 56 layers"), "{out}");
+    assert!(out.contains("Schaufler's rule"), "{out}");
+    assert!(out.contains("bound by"), "{out}");
+}
+
+#[test]
+fn layers_object_mode_plots_fig12() {
+    let d = tmp("cli", "layers-object-plot");
+    let svg = d.join("fig12.svg");
+    let v = object_layers_json(42.0, 1024, &["--plot", svg.to_str().unwrap()]);
+    assert_eq!(v["layer_count"], 56);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let doc = roxmltree::Document::parse(&text).expect("the plot is well-formed XML");
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    let labels: Vec<&str> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter_map(|n| n.text().map(str::trim))
+        .collect();
+    for name in [
+        "256 px",
+        "512 px",
+        "1024 px",
+        "TR Fig. 11 (dragon, 10 m cell)",
+        "42 m",
+        "84 m",
+        "168 m",
+    ] {
+        assert!(labels.contains(&name), "series `{name}` in {labels:?}");
+    }
+    assert!(labels.iter().any(|l| l.contains("object distance")));
+    assert!(labels.iter().any(|l| l.contains("view-cell size")));
+}
+
+#[test]
+fn layers_object_mode_rejects_bad_flags() {
+    let base = ["layers", "--cell", "10"];
+    let run = |extra: &[&str]| {
+        let mut a = base.to_vec();
+        a.extend(extra);
+        lemi(&a)
+    };
+    for (extra, flag) in [
+        (
+            &["--object-distance", "nan", "--object-size", "20"][..],
+            "--object-distance",
+        ),
+        (
+            &["--object-distance", "0", "--object-size", "20"],
+            "--object-distance",
+        ),
+        (
+            &["--object-distance", "-1", "--object-size", "20"],
+            "--object-distance",
+        ),
+        (
+            &["--object-distance", "inf", "--object-size", "20"],
+            "--object-distance",
+        ),
+        (
+            &["--object-distance", "42", "--object-size", "0"],
+            "--object-size",
+        ),
+        (
+            &["--object-distance", "42", "--object-size", "nan"],
+            "--object-size",
+        ),
+        (
+            &[
+                "--object-distance",
+                "42",
+                "--object-size",
+                "20",
+                "--object-depth",
+                "nan",
+            ],
+            "--object-depth",
+        ),
+        (
+            &[
+                "--object-distance",
+                "42",
+                "--object-size",
+                "20",
+                "--shaft-angle",
+                "180",
+            ],
+            "--shaft-angle",
+        ),
+        (
+            &[
+                "--object-distance",
+                "42",
+                "--object-size",
+                "20",
+                "--shaft-angle",
+                "0",
+            ],
+            "--shaft-angle",
+        ),
+        (&["--object-distance", "42"], "--object-size"),
+        (&["--object-size", "20"], "--object-distance"),
+        (
+            &["--shaft-angle", "30", "--layers", "4", "--resolution", "64"],
+            "--shaft-angle",
+        ),
+    ] {
+        assert_clean_error(&run(extra), flag);
+    }
+    // object-mode and env-mode flags mixed: both named
+    for (extra, env_flag) in [
+        (
+            &[
+                "--object-distance",
+                "42",
+                "--object-size",
+                "20",
+                "--layers",
+                "4",
+            ][..],
+            "--layers",
+        ),
+        (
+            &[
+                "--object-distance",
+                "42",
+                "--object-size",
+                "20",
+                "--near-field",
+                "50",
+            ],
+            "--near-field",
+        ),
+        (
+            &["--object-distance", "42", "--object-size", "20", "--2d"],
+            "--2d",
+        ),
+        (
+            &["--object-size", "20", "--resolution", "64", "--layers", "4"],
+            "--layers",
+        ),
+    ] {
+        let o = run(extra);
+        common::assert_clean_error_all(&o, &[env_flag]);
+        let e = stderr(&o);
+        assert!(e.contains("--object-"), "names the object flag: {e}");
+    }
+    // the env mode still needs its resolution and a target
+    assert_clean_error(&run(&["--layers", "4"]), "--resolution");
+    assert_clean_error(&run(&["--resolution", "64"]), "--layers");
+}
+
 /// `lemi bake` → `lemi render BUNDLE --compare`, resume, shards + merge, all through the binary.
 #[test]
 fn bake_render_compare_resume_and_merge() {
