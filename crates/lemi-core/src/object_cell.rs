@@ -356,6 +356,171 @@ impl ObjectFrame {
     }
 }
 
+/// A rectangular opening from a room to the outside (TR sec. 3, portal impostors; Rafferty et al.
+/// 1998): centred on `center`, in the plane through it across `outward` (the unit normal pointing
+/// out of the room, toward what the impostor shows), with half sizes `half` along the right and
+/// down directions of a view along `outward` (for a vertical wall: half the width along the wall,
+/// half the height).
+///
+/// **Its impostor.** The view cell is the shaft with its apex at the opening's centre opening into
+/// the room ([`Portal::view_cell`]: apex angle β, at least `min_distance` from the opening), the
+/// reference viewpoint `s` = `min_distance`·tan(β/2) behind its near border (the TR's shaft
+/// choice). A viewpoint `v` of the shaft sees beyond the opening only along `w − v` for `w` in the
+/// opening; across the axis such a ray rises at most tan(β/2) + half/`min_distance` per unit of
+/// depth (the farthest lateral viewpoint at the near border looking past the far edge), and a
+/// point of the ray beyond the opening, seen from the reference viewpoint (which lies on the axis
+/// behind all of that), rises less. So the frustum with those tangents ([`Portal::frame`]) holds
+/// everything any viewpoint of the cell can see through the opening, whatever lies beyond it: the
+/// object is whatever lies wholly in that frustum beyond a near distance ([`Portal::select`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Portal {
+    pub center: DVec3,
+    pub outward: DVec3,
+    pub half: [f64; 2],
+}
+
+impl Portal {
+    /// Parses `cx,cy,cz,nx,ny,nz,width,height` (the opening's centre, its outward normal, its
+    /// width along the wall and its height) and checks it ([`Portal::validate`]).
+    pub fn parse(spec: &str) -> Result<Portal, ObjectError> {
+        let v = numbers(
+            spec,
+            8,
+            "the opening's centre cx,cy,cz, its outward normal nx,ny,nz, its width and height",
+        )
+        .map_err(ObjectError::ViewCell)?;
+        let n = DVec3::new(v[3], v[4], v[5]);
+        let p = Portal {
+            center: DVec3::new(v[0], v[1], v[2]),
+            outward: if n.length() > 0.0 { n.normalize() } else { n },
+            half: [0.5 * v[6], 0.5 * v[7]],
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    /// Checks the opening: finite, a unit normal, a positive width and height.
+    pub fn validate(&self) -> Result<(), ObjectError> {
+        let bad = |m: String| Err(ObjectError::ViewCell(m));
+        if !self.center.is_finite() {
+            return bad("the portal's centre must be finite".into());
+        }
+        if !self.outward.is_finite() || (self.outward.length() - 1.0).abs() > 1e-9 {
+            return bad("the portal's outward normal must be a non-zero vector".into());
+        }
+        if !self.half.iter().all(|h| h.is_finite() && *h > 0.0) {
+            return bad(format!(
+                "the portal's width and height {} x {} must be positive",
+                2.0 * self.half[0],
+                2.0 * self.half[1]
+            ));
+        }
+        Ok(())
+    }
+
+    /// The opening as the flag that gives it (`cx,cy,cz,nx,ny,nz,width,height`).
+    pub fn describe(&self) -> String {
+        let (c, n) = (self.center, self.outward);
+        format!(
+            "{},{},{},{},{},{},{},{}",
+            c.x,
+            c.y,
+            c.z,
+            n.x,
+            n.y,
+            n.z,
+            2.0 * self.half[0],
+            2.0 * self.half[1]
+        )
+    }
+
+    /// The opening's four corners (world).
+    pub fn corners(&self) -> [DVec3; 4] {
+        let (right, down) = basis(self.outward);
+        [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .map(|(u, v)| self.center + right * (u * self.half[0]) + down * (v * self.half[1]))
+    }
+
+    /// The shaft cell of the opening: apex at its centre, opening into the room (against
+    /// `outward`) with apex angle `angle_deg`, from `min_distance` on.
+    pub fn view_cell(
+        &self,
+        angle_deg: f64,
+        min_distance: f64,
+    ) -> Result<ObjectViewCell, ObjectError> {
+        self.validate()?;
+        let cell = ObjectViewCell::Shaft {
+            apex: self.center,
+            dir: -self.outward,
+            angle_deg,
+            min_distance,
+        };
+        cell.validate()?;
+        Ok(cell)
+    }
+
+    /// The impostor's frame for the shaft cell of [`Portal::view_cell`] (see the type's docs).
+    pub fn frame(&self, angle_deg: f64, min_distance: f64) -> Result<ObjectFrame, ObjectError> {
+        self.view_cell(angle_deg, min_distance)?;
+        let forward = self.outward;
+        let (right, down) = basis(forward);
+        let t = (0.5 * angle_deg.to_radians()).tan();
+        let s = ObjectCell::Shaft {
+            apex_angle: angle_deg.to_radians(),
+            apex_distance: min_distance,
+        }
+        .recommended_s([0.0, 0.0]);
+        Ok(ObjectFrame {
+            origin: self.center - forward * (min_distance + s),
+            forward,
+            right,
+            down,
+            tan: self
+                .half
+                .map(|h| (t + h / min_distance) * (1.0 + FRUSTUM_SLACK)),
+        })
+    }
+
+    /// The triangles of `scene` a portal impostor with `frame` ([`Portal::frame`]) replaces:
+    /// every one lying wholly in the frustum and at least `near` beyond the opening's plane,
+    /// except those wholly inside `keep` (the building the rooms belong to, drawn as geometry).
+    /// A triangle reaching out of the frustum or nearer than `near` stays geometry (it may be
+    /// seen through another opening, or from where the impostor does not serve).
+    pub fn select(
+        &self,
+        frame: &ObjectFrame,
+        scene: &Scene,
+        keep: &Aabb,
+        near: f64,
+    ) -> Vec<TriRef> {
+        let plane = (self.center - frame.origin).dot(frame.forward) + near.max(0.0);
+        let mut out = Vec::new();
+        for (m, mesh) in scene.meshes.iter().enumerate() {
+            for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+                let mut kept = true;
+                let mut inside = true;
+                for &i in tri {
+                    let Some(v) = mesh.vertices.get(i as usize) else {
+                        inside = false;
+                        continue;
+                    };
+                    let p = DVec3::from_array(v.position.map(f64::from));
+                    kept &= keep.contains(p);
+                    let c = frame.to_canonical(p);
+                    inside &= c.z >= plane && c.x.abs() <= c.z && c.y.abs() <= c.z;
+                }
+                if inside && !kept {
+                    out.push(TriRef {
+                        mesh: m as u32,
+                        tri: t as u32,
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
 /// An object impostor's setup: the view cell, the object's box, the frame and the TR's placement
 /// inputs ([`ObjectParams`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -365,6 +530,10 @@ pub struct ObjectSetup {
     pub object: Aabb,
     pub frame: ObjectFrame,
     pub params: ObjectParams,
+    /// For a portal impostor ([`ObjectSetup::through_portal`]): the opening the outside is seen
+    /// through; the frustum is then set by the opening and the shaft, not by the object's box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub portal: Option<Portal>,
 }
 
 /// Depth of the frustum's near plane in front of the object's near side, relative, so that no
@@ -440,18 +609,6 @@ impl ObjectSetup {
         };
         let (right, down) = basis(forward);
         let origin = near_border_point - forward * s_of;
-        let depths: Vec<f64> = corners.iter().map(|c| (*c - origin).dot(forward)).collect();
-        let near = depths.iter().copied().fold(f64::INFINITY, f64::min);
-        let far = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let t0 = near - s_of;
-        if t0.is_nan() || t0 <= 0.0 {
-            return Err(ObjectError::Overlap(format!(
-                "the object's box {:?} to {:?} reaches {:.3} m into the view cell (its nearest point must lie beyond the cell's border nearest it)",
-                object.min.to_array(),
-                object.max.to_array(),
-                -t0
-            )));
-        }
         // the symmetric frustum through the reference viewpoint holding every corner
         let mut tan = [0.0f64; 2];
         for c in &corners {
@@ -463,7 +620,88 @@ impl ObjectSetup {
         // a flat object (a facade seen edge-on) still needs a frustum with some width
         let floor = 1e-6 * (tan[0].max(tan[1])).max(1e-9);
         let tan = tan.map(|t| t.max(floor) * (1.0 + FRUSTUM_SLACK));
-        let size = tan.map(|t| 2.0 * (t0 + s_of) * t);
+        let frame = ObjectFrame {
+            origin,
+            forward,
+            right,
+            down,
+            tan,
+        };
+        ObjectSetup::assemble(cell, object, frame, s_of, tr_cell, None, res, alpha)
+    }
+
+    /// Sets up the impostor of what is seen through `portal` (TR sec. 3: portal impostors) from
+    /// its shaft cell ([`Portal::view_cell`]): the frame is [`Portal::frame`], set by the opening
+    /// and the shaft alone, and `object` is the box of the triangles it replaces
+    /// ([`Portal::select`]), which must lie wholly beyond the opening's plane.
+    pub fn through_portal(
+        portal: &Portal,
+        angle_deg: f64,
+        min_distance: f64,
+        object: Aabb,
+        res: Option<u32>,
+        alpha: f64,
+    ) -> Result<ObjectSetup, ObjectError> {
+        let cell = portal.view_cell(angle_deg, min_distance)?;
+        let frame = portal.frame(angle_deg, min_distance)?;
+        let tr_cell = ObjectCell::Shaft {
+            apex_angle: angle_deg.to_radians(),
+            apex_distance: min_distance,
+        };
+        let s = tr_cell.recommended_s([0.0, 0.0]);
+        if !object.is_empty() {
+            let plane = s + min_distance;
+            let near = box_corners(&object)
+                .iter()
+                .map(|c| (*c - frame.origin).dot(frame.forward))
+                .fold(f64::INFINITY, f64::min);
+            if near.is_nan() || near < plane * (1.0 - NEAR_SLACK) {
+                return Err(ObjectError::Overlap(format!(
+                    "the object's box {:?} to {:?} reaches {:.3} m behind the portal's plane",
+                    object.min.to_array(),
+                    object.max.to_array(),
+                    plane - near
+                )));
+            }
+        }
+        ObjectSetup::assemble(cell, object, frame, s, tr_cell, Some(*portal), res, alpha)
+    }
+
+    /// The setup of `object` seen through `frame` (its frustum already chosen) from `cell`: the
+    /// TR's `t0` and depth from the object's box, the impostor's size at its near side and the
+    /// resolution (`None`: Schaufler's rule).
+    #[allow(clippy::too_many_arguments)]
+    fn assemble(
+        cell: ObjectViewCell,
+        object: Aabb,
+        frame: ObjectFrame,
+        s_of: f64,
+        tr_cell: ObjectCell,
+        portal: Option<Portal>,
+        res: Option<u32>,
+        alpha: f64,
+    ) -> Result<ObjectSetup, ObjectError> {
+        if object.is_empty() || !object.min.is_finite() || !object.max.is_finite() {
+            return Err(ObjectError::Object(
+                "it has no finite extent (no triangles selected?)".into(),
+            ));
+        }
+        let depths: Vec<f64> = box_corners(&object)
+            .iter()
+            .map(|c| (*c - frame.origin).dot(frame.forward))
+            .collect();
+        let near = depths.iter().copied().fold(f64::INFINITY, f64::min);
+        let far = depths.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let t0 = near - s_of;
+        if t0.is_nan() || t0 <= 0.0 {
+            return Err(ObjectError::Overlap(format!(
+                "the object's box {:?} to {:?} reaches {:.3} m into the view cell (its nearest point must lie beyond the cell's border nearest it)",
+                object.min.to_array(),
+                object.max.to_array(),
+                -t0
+            )));
+        }
+        let size = frame.tan.map(|t| 2.0 * (t0 + s_of) * t);
         let res = match res {
             Some(r) => r,
             None => schaufler_res(size[0].max(size[1]), t0, alpha)?,
@@ -481,14 +719,9 @@ impl ObjectSetup {
         Ok(ObjectSetup {
             cell,
             object,
-            frame: ObjectFrame {
-                origin,
-                forward,
-                right,
-                down,
-                tan,
-            },
+            frame,
             params,
+            portal,
         })
     }
 
@@ -558,9 +791,13 @@ impl ObjectSetup {
         }
     }
 
-    /// A point to look at from the cell: the centre of the object's box.
+    /// A point to look at from the cell: the centre of the object's box, or for a portal
+    /// impostor the point on the axis at the object's near side (looking through the opening).
     pub fn object_centre(&self) -> DVec3 {
-        self.object.center()
+        match self.portal {
+            Some(_) => self.frame.origin + self.frame.forward * (self.params.t0 + self.params.s),
+            None => self.object.center(),
+        }
     }
 }
 
@@ -797,7 +1034,98 @@ mod tests {
         }
     }
 
+    #[test]
+    fn portal_setup_and_selection() {
+        // a 1.2 x 1.4 m window in a wall facing -Z, a shaft of 90 degrees from 1.5 m
+        let portal = Portal::parse("5,1.75,-7.3,0,0,-1,1.2,1.4").expect("portal");
+        let frame = portal.frame(90.0, 1.5).expect("frame");
+        assert!((frame.forward - DVec3::NEG_Z).length() < 1e-12);
+        assert!(
+            (frame.tan[0] - (1.0 + 0.6 / 1.5)).abs() < 1e-5,
+            "{:?}",
+            frame.tan
+        );
+        assert!(
+            (frame.tan[1] - (1.0 + 0.7 / 1.5)).abs() < 1e-5,
+            "{:?}",
+            frame.tan
+        );
+        // s = 1.5 m: the reference viewpoint 3 m behind the opening, on its axis
+        assert!((frame.origin - DVec3::new(5.0, 1.75, -4.3)).length() < 1e-9);
+        for bad in [
+            "5,1.75,-7.3,0,0,0,1.2,1.4",
+            "5,1.75,-7.3,0,0,-1,0,1.4",
+            "1,2,3",
+        ] {
+            assert!(Portal::parse(bad).is_err(), "{bad}");
+        }
+        assert!(portal.view_cell(180.0, 1.5).is_err());
+        assert!(portal.view_cell(90.0, 0.0).is_err());
+        // one triangle far out on the axis, one reaching out of the frustum, one inside the
+        // kept building, one nearer than `near`
+        let tri = |a: [f32; 3], b: [f32; 3], c: [f32; 3]| {
+            let v = |p: [f32; 3]| crate::Vertex::new(p, [0.0, 1.0, 0.0], [0.0; 2], [255; 4]);
+            crate::Mesh {
+                vertices: vec![v(a), v(b), v(c)],
+                indices: vec![0, 1, 2],
+                ..Default::default()
+            }
+        };
+        let scene = Scene {
+            meshes: vec![
+                tri([4.0, 0.0, -40.0], [6.0, 0.0, -40.0], [5.0, 3.0, -41.0]),
+                tri([4.0, 0.0, -20.0], [90.0, 0.0, -20.0], [5.0, 3.0, -21.0]),
+                tri([4.0, 0.0, -5.0], [6.0, 0.0, -5.0], [5.0, 3.0, -6.0]),
+                tri([4.0, 0.0, -9.0], [6.0, 0.0, -9.0], [5.0, 3.0, -9.5]),
+            ],
+            ..Default::default()
+        };
+        let building = Aabb::new(DVec3::new(0.0, 0.0, -7.3), DVec3::new(10.0, 6.0, 0.0));
+        let object = portal.select(&frame, &scene, &building, 3.0);
+        assert_eq!(object, vec![TriRef { mesh: 0, tri: 0 }]);
+        let bounds = object_bounds(&scene, &object);
+        let setup =
+            ObjectSetup::through_portal(&portal, 90.0, 1.5, bounds, None, 2e-3).expect("setup");
+        assert_eq!(setup.portal, Some(portal));
+        assert!((setup.params.t0 - (40.0 - 7.3 + 1.5)).abs() < 1e-6);
+        // serialised without a portal, read back as None (older object bundles)
+        let json = serde_json::to_string(&setup).expect("json");
+        let back: ObjectSetup = serde_json::from_str(&json).expect("back");
+        assert_eq!(back, setup);
+        // an object behind the opening's plane is refused
+        let behind = Aabb::new(DVec3::new(4.0, 0.0, -7.0), DVec3::new(6.0, 1.0, -6.0));
+        assert!(matches!(
+            ObjectSetup::through_portal(&portal, 90.0, 1.5, behind, None, 2e-3),
+            Err(ObjectError::Overlap(_))
+        ));
+    }
+
     proptest! {
+        #[test]
+        fn everything_seen_through_a_portal_lies_in_its_frustum(
+            nx in -1.0f64..1.0, ny in -1.0f64..1.0, nz in -1.0f64..1.0,
+            hw in 0.1f64..3.0, hh in 0.1f64..3.0,
+            angle in 10.0f64..160.0, dmin in 0.2f64..10.0,
+            along in 0.0f64..40.0, u in -1.0f64..1.0, v in -1.0f64..1.0,
+            a in -1.0f64..1.0, b in -1.0f64..1.0, lambda in 1.0f64..1e4,
+        ) {
+            let n = DVec3::new(nx, ny, nz);
+            prop_assume!(n.length() > 0.1);
+            let portal = Portal { center: DVec3::new(1.0, 2.0, 3.0), outward: n.normalize(), half: [hw, hh] };
+            let frame = portal.frame(angle, dmin).expect("frame");
+            // a viewpoint of the shaft cell, a point of the opening, a point beyond it on the ray
+            let (right, down) = basis(portal.outward);
+            let reach = (dmin + along) * (0.5 * angle.to_radians()).tan();
+            let eye = portal.center - portal.outward * (dmin + along) + (right * u + down * v) * reach;
+            let cell = portal.view_cell(angle, dmin).expect("cell");
+            prop_assert!(cell.contains(eye * (1.0 - 1e-12) + portal.center * 1e-12) || (u.abs().max(v.abs()) > 0.999));
+            let w = portal.center + right * (a * hw) + down * (b * hh);
+            let x = eye + (w - eye) * lambda;
+            let c = frame.to_canonical(x);
+            prop_assert!(c.z > 0.0);
+            prop_assert!(c.x.abs() <= c.z * (1.0 + 1e-9) && c.y.abs() <= c.z * (1.0 + 1e-9), "{c}");
+        }
+
         #[test]
         fn frame_maps_invert_and_the_object_lies_in_the_pyramid(
             dx in -1.0f64..1.0, dy in -1.0f64..1.0, dz in -1.0f64..1.0,
