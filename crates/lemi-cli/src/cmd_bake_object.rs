@@ -5,6 +5,12 @@
 //! `--object` the whole scene is the object. The bundle holds one cell whose near list is
 //! everything else, so `lemi render`/`lemi eval` draw the object as impostor and the rest as
 //! geometry, and the object as geometry from outside its view cell.
+//!
+//! `--portal cx,cy,cz,nx,ny,nz,width,height` (or `--portal all`: every opening of a
+//! `builtin:interior` scene, one bundle each under `BUNDLE/portal-K`) bakes a portal impostor
+//! instead (TR sec. 3): the view cell is the opening's shaft ([`Portal::view_cell`],
+//! `--portal-angle`, `--portal-distance`), the object everything wholly in its frustum at least
+//! `--near` beyond the opening ([`Portal::select`]) except the building (`--keep`).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -16,7 +22,7 @@ use lemi_bake::object_bake::{bake_object, object_params, write_object_bundle};
 use lemi_core::bundle::{BakeParams, LayerTarget, SceneRef};
 use lemi_core::classify::TriRef;
 use lemi_core::compress::TextureFormat;
-use lemi_core::object_cell::{object_bounds, ObjectError, ObjectSetup, ObjectViewCell};
+use lemi_core::object_cell::{object_bounds, ObjectError, ObjectSetup, ObjectViewCell, Portal};
 use lemi_core::{Aabb, Face, Scene};
 use lemi_gpu::{BackendChoice, Gpu};
 use serde_json::json;
@@ -34,18 +40,50 @@ pub struct Args {
     pub out: PathBuf,
     /// The object: the triangles whose centroid lies in this box `x0,y0,z0,x1,y1,z1` (scene
     /// coordinates after --up). Default: the whole scene.
-    #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true)]
+    #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true, conflicts_with = "portal")]
     pub object: Option<Aabb>,
     /// The object: the triangles of one scene input, named by its path as given, its file name
     /// or its file name without extensions (`dragon` for `models/dragon.ply.gz`); with
     /// --object, only those of its triangles whose centroid lies in that box.
-    #[arg(long, value_name = "NAME")]
+    #[arg(long, value_name = "NAME", conflicts_with = "portal")]
     pub object_mesh: Option<String>,
     /// The view cell: `box:x0,y0,z0,x1,y1,z1`, or `shaft:ax,ay,az,dx,dy,dz,angle_deg,min_distance`
     /// (apex, direction from the apex toward the viewer, full apex angle, the cell's distance
     /// from the apex).
-    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
-    pub view_cell: String,
+    #[arg(
+        long,
+        value_name = "SPEC",
+        allow_hyphen_values = true,
+        required_unless_present = "portal",
+        conflicts_with = "portal"
+    )]
+    pub view_cell: Option<String>,
+    /// A portal impostor: the outside seen through the opening `cx,cy,cz,nx,ny,nz,width,height`
+    /// (centre, outward normal, width along the wall, height), or `all`: one bundle per opening
+    /// of a `builtin:interior` scene, in `BUNDLE/portal-K`.
+    #[arg(long, value_name = "SPEC|all", allow_hyphen_values = true)]
+    pub portal: Option<String>,
+    /// Full apex angle of a portal's shaft cell, in degrees.
+    #[arg(long, default_value_t = 90.0, requires = "portal")]
+    pub portal_angle: f64,
+    /// Distance of a portal's shaft cell from the opening (m): nearer, the geometry is drawn.
+    #[arg(long, default_value_t = 1.5, requires = "portal")]
+    pub portal_distance: f64,
+    /// Farthest distance of a portal's shaft cell from the opening (m): the room's far side.
+    /// Default with `--portal all`: the far side of the opening's room; otherwise unbounded (the
+    /// TR's shaft, which needs many more layers: from far back in an endless shaft every depth
+    /// shows parallax).
+    #[arg(long, requires = "portal")]
+    pub portal_max_distance: Option<f64>,
+    /// What a portal impostor leaves to geometry beyond the opening (m). Default: the shaft
+    /// cell's width at its far end (at 4 × --portal-distance when unbounded): the impostor
+    /// starts one cell width beyond the opening.
+    #[arg(long, requires = "portal")]
+    pub near: Option<f64>,
+    /// Triangles wholly inside this box `x0,y0,z0,x1,y1,z1` stay geometry (the building the
+    /// rooms are in). Default with `--portal all`: the built-in building's box.
+    #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true, requires = "portal")]
+    pub keep: Option<Aabb>,
     /// Texels across the impostor. Default: Schaufler's rule (a texel of the object's near face
     /// subtends α from the nearest viewpoint of the cell).
     #[arg(long)]
@@ -111,26 +149,136 @@ fn flag_of(e: &ObjectError) -> &'static str {
     }
 }
 
-pub fn run(args: Args) -> Result<()> {
-    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
-    let cell = ObjectViewCell::parse(&args.view_cell).context("--view-cell")?;
-    let (alpha, fov, width) = alpha_of(args.alpha_deg, args.output_fov, args.output_width)?;
-    if let Some(r) = args.resolution {
-        let range = lemi_core::bundle::MIN_RESOLUTION..=lemi_core::bundle::MAX_RESOLUTION;
-        if !range.contains(&r) {
-            bail!(
-                "--resolution must be between {} and {} texels, got {r}",
-                range.start(),
-                range.end()
-            );
+/// One impostor to bake: where it goes, its setup and the triangles it replaces.
+struct Job {
+    out: PathBuf,
+    /// `object` or `portal K`, for messages.
+    label: String,
+    setup: ObjectSetup,
+    object: Vec<TriRef>,
+    bounds: Aabb,
+}
+
+/// The openings `--portal` names, each with the default of `--portal-max-distance` (the far
+/// side of its room, for the built-in ones), and the default of `--keep` for them.
+type PortalList = (Vec<(Portal, Option<f64>)>, Option<Aabb>);
+
+fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
+    if spec.trim() != "all" {
+        return Ok((vec![(Portal::parse(spec).context("--portal")?, None)], None));
+    }
+    let layout = match sources {
+        [one] => lemi_scene::builtin::BuiltinSpec::parse(one)
+            .ok()
+            .and_then(|s| lemi_scene::builtin::interior_layout(&s)),
+        _ => None,
+    };
+    let Some(layout) = layout else {
+        bail!(
+            "--portal all: only a builtin:interior scene knows its openings (the scene is {}); \
+             give each opening as --portal cx,cy,cz,nx,ny,nz,width,height",
+            sources.join(" ")
+        );
+    };
+    let portals = layout
+        .portals
+        .iter()
+        .map(|p| {
+            let portal = Portal {
+                center: DVec3::from_array(p.center.map(f64::from)),
+                outward: DVec3::from_array(p.outward.map(f64::from)),
+                half: [0.5 * f64::from(p.width), 0.5 * f64::from(p.height)],
+            };
+            // the farthest corner of the room's walkable box behind the opening
+            let far = layout.rooms.get(p.room).map(|r| {
+                let room = Aabb::new(
+                    DVec3::from_array(r.min.map(f64::from)),
+                    DVec3::from_array(r.max.map(f64::from)),
+                );
+                lemi_core::object_cell::box_corners(&room)
+                    .iter()
+                    .map(|c| (portal.center - *c).dot(portal.outward))
+                    .fold(0.0, f64::max)
+            });
+            (portal, far)
+        })
+        .collect();
+    // the building, a millimetre larger than its box so that rounding keeps its walls
+    let keep = Aabb::new(
+        DVec3::from_array(layout.building_min.map(f64::from)) - DVec3::splat(1e-3),
+        DVec3::from_array(layout.building_max.map(f64::from)) + DVec3::splat(1e-3),
+    );
+    Ok((portals, Some(keep)))
+}
+
+/// The jobs of `--portal`: one per opening, each replacing what lies wholly in its frustum beyond
+/// `--near` (default `4 s − d`, see `Args::near`).
+fn portal_jobs(args: &Args, spec: &str, scene: &Scene, alpha: f64) -> Result<Vec<Job>> {
+    let (portals, default_keep) = portals_of(spec, &args.scene.scenes)?;
+    let keep = args.keep.or(default_keep).unwrap_or(Aabb::EMPTY);
+    if let Some(n) = args.near {
+        if !(n.is_finite() && n >= 0.0) {
+            bail!("--near must be a distance of 0 m or more, got {n}");
         }
     }
-    let sources = absolute_sources(&args.scene.scenes);
-    let scene_args = SceneArgs {
-        scenes: sources.clone(),
-        up: args.scene.up,
-    };
-    let (scene, report, load_seconds) = load_scene_with_report(&scene_args, args.json)?;
+    let (angle, d) = (args.portal_angle, args.portal_distance);
+    let many = portals.len() > 1 || spec.trim() == "all";
+    let mut jobs = Vec::new();
+    for (k, (portal, room_far)) in portals.iter().enumerate() {
+        let max = args.portal_max_distance.or(*room_far);
+        let label = if many {
+            format!("portal {k}")
+        } else {
+            "portal".to_string()
+        };
+        let bad = |e: ObjectError| {
+            let flag = match e {
+                ObjectError::ViewCell(_) => "--portal/--portal-angle/--portal-distance",
+                _ => "--portal/--near/--keep",
+            };
+            anyhow::anyhow!("{flag}: {label} ({}): {e}", portal.describe())
+        };
+        portal.view_cell(angle, d, max).map_err(bad)?;
+        let frame = portal.frame(angle, d).map_err(bad)?;
+        let tan = (0.5 * angle.to_radians()).tan();
+        let near = args.near.unwrap_or(2.0 * tan * max.unwrap_or(4.0 * d));
+        let object = portal.select(&frame, scene, &keep, near);
+        if object.is_empty() {
+            bail!(
+                "--portal: nothing lies wholly in the frustum of {label} ({}) {near} m or more \
+                 beyond it (outside --keep): there is nothing to replace",
+                portal.describe()
+            );
+        }
+        let bounds = object_bounds(scene, &object);
+        let setup =
+            ObjectSetup::through_portal(portal, angle, d, max, bounds, args.resolution, alpha)
+                .map_err(bad)?;
+        let out = if many {
+            args.out.join(format!("portal-{k}"))
+        } else {
+            args.out.clone()
+        };
+        jobs.push(Job {
+            out,
+            label,
+            setup,
+            object,
+            bounds,
+        });
+    }
+    Ok(jobs)
+}
+
+/// The job of `--view-cell` with `--object`/`--object-mesh`.
+fn object_job(
+    args: &Args,
+    view_cell: &str,
+    scene: &Scene,
+    report: &lemi_scene::import::ImportReport,
+    alpha: f64,
+) -> Result<Job> {
+    let cell = ObjectViewCell::parse(view_cell).context("--view-cell")?;
     let meshes = match &args.object_mesh {
         None => 0..scene.meshes.len(),
         Some(name) => {
@@ -158,7 +306,7 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     };
-    let object = select(&scene, meshes, args.object.as_ref());
+    let object = select(scene, meshes, args.object.as_ref());
     if object.is_empty() {
         bail!(
             "--object/--object-mesh: no triangle of the scene has its centroid in the box {}",
@@ -167,23 +315,130 @@ pub fn run(args: Args) -> Result<()> {
                 .unwrap_or_default()
         );
     }
-    let bounds = object_bounds(&scene, &object);
+    let bounds = object_bounds(scene, &object);
     let setup = ObjectSetup::new(cell, bounds, args.resolution, alpha)
         .map_err(|e| anyhow::anyhow!("{}: {e}", flag_of(&e)))?;
-    if !(lemi_core::bundle::MIN_RESOLUTION..=lemi_core::bundle::MAX_RESOLUTION)
-        .contains(&setup.params.res)
-    {
-        bail!(
-            "Schaufler's rule asks for {} texels across the impostor, outside {}..={}; give \
-             --resolution, or a coarser output view (--output-width)",
-            setup.params.res,
-            lemi_core::bundle::MIN_RESOLUTION,
-            lemi_core::bundle::MAX_RESOLUTION
-        );
+    Ok(Job {
+        out: args.out.clone(),
+        label: "object".into(),
+        setup,
+        object,
+        bounds,
+    })
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let backend = BackendChoice::parse(&args.backend).context("--backend")?;
+    let (alpha, fov, width) = alpha_of(args.alpha_deg, args.output_fov, args.output_width)?;
+    if let Some(r) = args.resolution {
+        let range = lemi_core::bundle::MIN_RESOLUTION..=lemi_core::bundle::MAX_RESOLUTION;
+        if !range.contains(&r) {
+            bail!(
+                "--resolution must be between {} and {} texels, got {r}",
+                range.start(),
+                range.end()
+            );
+        }
     }
+    if let Some(spec) = &args.view_cell {
+        ObjectViewCell::parse(spec).context("--view-cell")?;
+    }
+    if let Some(spec) = &args.portal {
+        if spec.trim() != "all" {
+            Portal::parse(spec).context("--portal")?;
+        }
+        for (flag, v) in [
+            ("--portal-angle", args.portal_angle),
+            ("--portal-distance", args.portal_distance),
+            (
+                "--portal-max-distance",
+                args.portal_max_distance.unwrap_or(1.0),
+            ),
+        ] {
+            if !v.is_finite() {
+                bail!("{flag} must be a finite number, got {v}");
+            }
+        }
+    }
+    let sources = absolute_sources(&args.scene.scenes);
+    let scene_args = SceneArgs {
+        scenes: sources.clone(),
+        up: args.scene.up,
+    };
+    let (scene, report, load_seconds) = load_scene_with_report(&scene_args, args.json)?;
+    let jobs = match (&args.portal, &args.view_cell) {
+        (Some(spec), _) => portal_jobs(&args, spec, &scene, alpha)?,
+        (None, Some(cell)) => vec![object_job(&args, cell, &scene, &report, alpha)?],
+        (None, None) => bail!("give --view-cell (an object impostor) or --portal"),
+    };
+    for job in &jobs {
+        if !(lemi_core::bundle::MIN_RESOLUTION..=lemi_core::bundle::MAX_RESOLUTION)
+            .contains(&job.setup.params.res)
+        {
+            bail!(
+                "{}: Schaufler's rule asks for {} texels across the impostor, outside {}..={}; \
+                 give --resolution, or a coarser output view (--output-width)",
+                job.label,
+                job.setup.params.res,
+                lemi_core::bundle::MIN_RESOLUTION,
+                lemi_core::bundle::MAX_RESOLUTION
+            );
+        }
+    }
+    let fingerprint = lemi_scene::fingerprint(&sources, args.scene.up.into())
+        .context("fingerprinting the scene")?;
+    let gpu = Gpu::new(backend)?;
+    let scene_ref = SceneRef {
+        sources,
+        up: match args.scene.up {
+            UpArg::Y => "y".into(),
+            UpArg::Z => "z".into(),
+        },
+        fingerprint,
+        triangles: scene.triangle_count(),
+    };
+    let mut reports = Vec::new();
+    for (k, job) in jobs.iter().enumerate() {
+        let r = bake_job(
+            &args,
+            job,
+            &gpu,
+            &scene,
+            &scene_ref,
+            (fov, width),
+            (k, jobs.len()),
+            load_seconds,
+        )?;
+        reports.push(r);
+    }
+    if args.json {
+        let out = match &reports[..] {
+            [one] if args.portal.as_deref().map(str::trim) != Some("all") => one.clone(),
+            _ => serde_json::Value::Array(reports),
+        };
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    }
+    Ok(())
+}
+
+/// Bakes and writes one job; prints its summary (unless `--json`) and returns its JSON report.
+#[allow(clippy::too_many_arguments)]
+fn bake_job(
+    args: &Args,
+    job: &Job,
+    gpu: &Gpu,
+    scene: &Scene,
+    scene_ref: &SceneRef,
+    (fov, width): (Option<f64>, Option<u32>),
+    (k, of): (usize, usize),
+    load_seconds: f64,
+) -> Result<serde_json::Value> {
+    let setup = &job.setup;
+    let bounds = job.bounds;
+    let alpha = setup.params.alpha;
     let placement = setup
         .place()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", flag_of(&e)))?;
+        .map_err(|e| anyhow::anyhow!("{}: {}: {e}", job.label, flag_of(&e)))?;
     let base = BakeParams {
         cell_size: 1.0,
         cell_height: None,
@@ -198,13 +453,10 @@ pub fn run(args: Args) -> Result<()> {
         layering: Default::default(),
         texture_format: args.texture_format,
     };
-    let params = object_params(&setup, placement.layers.len(), &base);
+    let params = object_params(setup, placement.layers.len(), &base);
     params
         .validate()
-        .map_err(|e| anyhow::anyhow!("{e} (the object's setup)"))?;
-    let fingerprint = lemi_scene::fingerprint(&sources, args.scene.up.into())
-        .context("fingerprinting the scene")?;
-    let gpu = Gpu::new(backend)?;
+        .map_err(|e| anyhow::anyhow!("{}: {e} (the object's setup)", job.label))?;
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
@@ -216,24 +468,25 @@ pub fn run(args: Args) -> Result<()> {
     );
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let t = Instant::now();
-    let baked = bake_object(&gpu, &scene, &object, &setup, params.clone(), |stage| {
-        bar.set_message(format!("object impostor: {stage}"))
+    let what = if of > 1 {
+        format!("{} ({}/{of})", job.label, k + 1)
+    } else {
+        job.label.clone()
+    };
+    let baked = bake_object(gpu, scene, &job.object, setup, params.clone(), |stage| {
+        bar.set_message(format!("{what} impostor: {stage}"))
     });
     bar.finish_and_clear();
-    let mut baked =
-        baked.with_context(|| format!("baking the object impostor into {}", args.out.display()))?;
+    let mut baked = baked.with_context(|| {
+        format!(
+            "baking the {} impostor into {}",
+            job.label,
+            job.out.display()
+        )
+    })?;
     let bake_seconds = t.elapsed().as_secs_f64();
-    let scene_ref = SceneRef {
-        sources,
-        up: match args.scene.up {
-            UpArg::Y => "y".into(),
-            UpArg::Z => "z".into(),
-        },
-        fingerprint,
-        triangles: scene.triangle_count(),
-    };
-    let (_, cell_bytes) = write_object_bundle(&args.out, scene_ref, &params, &mut baked)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    let (_, cell_bytes) = write_object_bundle(&job.out, scene_ref.clone(), &params, &mut baked)
+        .with_context(|| format!("writing {}", job.out.display()))?;
     let p = &setup.params;
     let header = &baked.file.header;
     let stats = &header.stats;
@@ -251,37 +504,43 @@ pub fn run(args: Args) -> Result<()> {
             })
         })
         .collect();
+    let report = json!({
+        "bundle": job.out,
+        "view_cell": setup.cell,
+        "portal": setup.portal.map(|p| p.describe()),
+        "object_bounds": [bounds.min.to_array(), bounds.max.to_array()],
+        "object_triangles": baked.object_triangles,
+        "geometry_triangles": baked.file.near.len(),
+        "reference_viewpoint": setup.frame.origin.to_array(),
+        "axis": setup.frame.forward.to_array(),
+        "s": p.s,
+        "t0": p.t0,
+        "object_depth": p.depth,
+        "object_size": p.size,
+        "resolution": p.res,
+        "alpha_deg": p.alpha.to_degrees(),
+        "output_fov_deg": fov,
+        "output_width": width,
+        "layer_count": layers.len(),
+        "single_layer_beyond": if baked.placement.single_layer_beyond.is_finite() { Some(baked.placement.single_layer_beyond) } else { None },
+        "layers": layers,
+        "quads": header.quads.len(),
+        "macro_textures": header.macros.len(),
+        "texture_format": args.texture_format.name(),
+        "texture_bytes": stats.texture_bytes(),
+        "cell_bytes": cell_bytes,
+        "load_seconds": load_seconds,
+        "bake_seconds": bake_seconds,
+        "stage_seconds": stats.seconds.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
+    });
     if args.json {
-        let out = json!({
-            "bundle": args.out,
-            "view_cell": setup.cell,
-            "object_bounds": [bounds.min.to_array(), bounds.max.to_array()],
-            "object_triangles": baked.object_triangles,
-            "geometry_triangles": baked.file.near.len(),
-            "reference_viewpoint": setup.frame.origin.to_array(),
-            "axis": setup.frame.forward.to_array(),
-            "s": p.s,
-            "t0": p.t0,
-            "object_depth": p.depth,
-            "object_size": p.size,
-            "resolution": p.res,
-            "alpha_deg": p.alpha.to_degrees(),
-            "output_fov_deg": fov,
-            "output_width": width,
-            "layer_count": layers.len(),
-            "single_layer_beyond": if baked.placement.single_layer_beyond.is_finite() { Some(baked.placement.single_layer_beyond) } else { None },
-            "layers": layers,
-            "quads": header.quads.len(),
-            "macro_textures": header.macros.len(),
-            "texture_format": args.texture_format.name(),
-            "texture_bytes": stats.texture_bytes(),
-            "cell_bytes": cell_bytes,
-            "load_seconds": load_seconds,
-            "bake_seconds": bake_seconds,
-            "stage_seconds": stats.seconds.iter().map(|(k, v)| (k.clone(), json!(v))).collect::<serde_json::Map<_, _>>(),
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        return Ok(report);
+    }
+    if of > 1 {
+        println!("--- {} of {of}: {}", k + 1, job.label);
+    }
+    if let Some(portal) = &setup.portal {
+        println!("portal     {}", portal.describe());
     }
     println!(
         "object     {} triangles, box {:?} to {:?}; {} triangles stay geometry",
@@ -320,6 +579,6 @@ pub fn run(args: Args) -> Result<()> {
         human(cell_bytes as f64)
     );
     println!("time       load {load_seconds:.1} s, bake {bake_seconds:.1} s");
-    println!("wrote      {}", args.out.display());
-    Ok(())
+    println!("wrote      {}", job.out.display());
+    Ok(report)
 }

@@ -85,6 +85,7 @@ impl Geometry {
                     dir: DVec3::NEG_X,
                     angle_deg: angle,
                     min_distance: apex_distance,
+                    max_distance: None,
                 }
             }
         };

@@ -183,6 +183,7 @@ fn object_placement_in_process(
                 dir: DVec3::NEG_X,
                 angle_deg: a,
                 min_distance: apex,
+                max_distance: None,
             }
         }
     };

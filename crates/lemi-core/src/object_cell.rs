@@ -65,13 +65,15 @@ pub enum ObjectViewCell {
     Box { min: DVec3, max: DVec3 },
     /// A square shaft with its apex at `apex` opening along the unit direction `dir` (from the
     /// apex toward the viewer) with full apex angle `angle_deg` in both directions across it; the
-    /// cell is the part of the shaft at least `min_distance` from the apex along `dir`, unbounded
-    /// away from the apex.
+    /// cell is the part of the shaft at least `min_distance` from the apex along `dir`, and at
+    /// most `max_distance` (unbounded away from the apex without it, as the TR's shafts).
     Shaft {
         apex: DVec3,
         dir: DVec3,
         angle_deg: f64,
         min_distance: f64,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        max_distance: Option<f64>,
     },
 }
 
@@ -127,12 +129,9 @@ impl ObjectViewCell {
                 }
             }
             "shaft" => {
-                let v = numbers(
-                    body,
-                    8,
-                    "apex ax,ay,az, direction dx,dy,dz toward the viewer, apex angle in degrees, distance of the cell from the apex",
-                )
-                .map_err(bad)?;
+                let what = "apex ax,ay,az, direction dx,dy,dz toward the viewer, apex angle in degrees, distance of the cell from the apex[, its far end's distance]";
+                let n = body.split(',').count();
+                let v = numbers(body, if n == 9 { 9 } else { 8 }, what).map_err(bad)?;
                 let dir = DVec3::new(v[3], v[4], v[5]);
                 ObjectViewCell::Shaft {
                     apex: DVec3::new(v[0], v[1], v[2]),
@@ -143,6 +142,7 @@ impl ObjectViewCell {
                     },
                     angle_deg: v[6],
                     min_distance: v[7],
+                    max_distance: v.get(8).copied(),
                 }
             }
             k => return Err(bad(format!("`{k}` is not a view-cell kind (box or shaft)"))),
@@ -175,7 +175,15 @@ impl ObjectViewCell {
                 dir,
                 angle_deg,
                 min_distance,
+                max_distance,
             } => {
+                if let Some(max) = max_distance {
+                    if !(max.is_finite() && max > min_distance) {
+                        return bad(format!(
+                            "the shaft's far end {max} must be finite and farther from the apex than its near end {min_distance}"
+                        ));
+                    }
+                }
                 if !apex.is_finite() {
                     return bad("the shaft's apex must be finite".into());
                 }
@@ -207,7 +215,13 @@ impl ObjectViewCell {
                 dir,
                 angle_deg,
                 min_distance,
-            } => format!("shaft:{},{},{angle_deg},{min_distance}", v(apex), v(dir)),
+                max_distance,
+            } => format!(
+                "shaft:{},{},{angle_deg},{min_distance}{}",
+                v(apex),
+                v(dir),
+                max_distance.map(|m| format!(",{m}")).unwrap_or_default()
+            ),
         }
     }
 
@@ -220,10 +234,12 @@ impl ObjectViewCell {
                 dir,
                 angle_deg,
                 min_distance,
+                max_distance,
             } => {
                 let r = p - apex;
                 let along = r.dot(dir);
-                if along.is_nan() || along < min_distance {
+                if along.is_nan() || along < min_distance || max_distance.is_some_and(|m| along > m)
+                {
                     return false;
                 }
                 let (right, down) = basis(-dir);
@@ -255,6 +271,7 @@ impl ObjectViewCell {
                 dir,
                 angle_deg,
                 min_distance,
+                max_distance,
             } => {
                 let (right, down) = basis(-dir);
                 let tan = (0.5 * angle_deg.to_radians()).tan() * (1.0 - 1e-9);
@@ -264,13 +281,27 @@ impl ObjectViewCell {
                 };
                 let mut out = Vec::new();
                 let near = min_distance * (1.0 + 1e-9);
-                for (name, back) in [
-                    ("near border", 0.0),
-                    ("1 width back", 1.0),
-                    ("4 widths back", 4.0),
-                    ("16 widths back", 16.0),
-                ] {
-                    let along = near + back * near_width;
+                // a bounded shaft: its near border, middle and far border
+                let sections: Vec<(&str, f64)> = match max_distance {
+                    Some(max) => {
+                        let depth = (max * (1.0 - 1e-9) - near).max(0.0);
+                        vec![
+                            ("near border", 0.0),
+                            ("middle", 0.5 * depth),
+                            ("far border", depth),
+                        ]
+                    }
+                    None => [
+                        ("near border", 0.0),
+                        ("1 width back", near_width),
+                        ("4 widths back", 4.0 * near_width),
+                        ("16 widths back", 16.0 * near_width),
+                    ]
+                    .to_vec(),
+                };
+                let farthest = sections.last().map_or(0.0, |s| s.1);
+                for (name, back) in sections {
+                    let along = near + back;
                     out.push((format!("{name} centre"), at(along, 0.0, 0.0)));
                     for (k, (u, v)) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
                         .into_iter()
@@ -293,7 +324,7 @@ impl ObjectViewCell {
                     (x >> 11) as f64 / (1u64 << 53) as f64
                 };
                 for k in 0..random {
-                    let along = near + 16.0 * near_width * next();
+                    let along = near + farthest * next();
                     let (u, v) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
                     out.push((format!("random {k}"), at(along, u, v)));
                 }
@@ -442,11 +473,13 @@ impl Portal {
     }
 
     /// The shaft cell of the opening: apex at its centre, opening into the room (against
-    /// `outward`) with apex angle `angle_deg`, from `min_distance` on.
+    /// `outward`) with apex angle `angle_deg`, from `min_distance` on, to `max_distance` (the
+    /// room's far side) if given.
     pub fn view_cell(
         &self,
         angle_deg: f64,
         min_distance: f64,
+        max_distance: Option<f64>,
     ) -> Result<ObjectViewCell, ObjectError> {
         self.validate()?;
         let cell = ObjectViewCell::Shaft {
@@ -454,6 +487,7 @@ impl Portal {
             dir: -self.outward,
             angle_deg,
             min_distance,
+            max_distance,
         };
         cell.validate()?;
         Ok(cell)
@@ -461,13 +495,14 @@ impl Portal {
 
     /// The impostor's frame for the shaft cell of [`Portal::view_cell`] (see the type's docs).
     pub fn frame(&self, angle_deg: f64, min_distance: f64) -> Result<ObjectFrame, ObjectError> {
-        self.view_cell(angle_deg, min_distance)?;
+        self.view_cell(angle_deg, min_distance, None)?;
         let forward = self.outward;
         let (right, down) = basis(forward);
         let t = (0.5 * angle_deg.to_radians()).tan();
         let s = ObjectCell::Shaft {
             apex_angle: angle_deg.to_radians(),
             apex_distance: min_distance,
+            reach: None,
         }
         .recommended_s([0.0, 0.0]);
         Ok(ObjectFrame {
@@ -598,10 +633,12 @@ impl ObjectSetup {
                 dir,
                 angle_deg,
                 min_distance,
+                max_distance,
             } => {
                 let tr = ObjectCell::Shaft {
                     apex_angle: angle_deg.to_radians(),
                     apex_distance: min_distance,
+                    reach: max_distance.map(|m| m - min_distance),
                 };
                 let s = tr.recommended_s([0.0, 0.0]);
                 (-dir, apex + dir * min_distance, s, tr)
@@ -634,19 +671,22 @@ impl ObjectSetup {
     /// its shaft cell ([`Portal::view_cell`]): the frame is [`Portal::frame`], set by the opening
     /// and the shaft alone, and `object` is the box of the triangles it replaces
     /// ([`Portal::select`]), which must lie wholly beyond the opening's plane.
+    #[allow(clippy::too_many_arguments)]
     pub fn through_portal(
         portal: &Portal,
         angle_deg: f64,
         min_distance: f64,
+        max_distance: Option<f64>,
         object: Aabb,
         res: Option<u32>,
         alpha: f64,
     ) -> Result<ObjectSetup, ObjectError> {
-        let cell = portal.view_cell(angle_deg, min_distance)?;
+        let cell = portal.view_cell(angle_deg, min_distance, max_distance)?;
         let frame = portal.frame(angle_deg, min_distance)?;
         let tr_cell = ObjectCell::Shaft {
             apex_angle: angle_deg.to_radians(),
             apex_distance: min_distance,
+            reach: max_distance.map(|m| m - min_distance),
         };
         let s = tr_cell.recommended_s([0.0, 0.0]);
         if !object.is_empty() {
@@ -1059,8 +1099,9 @@ mod tests {
         ] {
             assert!(Portal::parse(bad).is_err(), "{bad}");
         }
-        assert!(portal.view_cell(180.0, 1.5).is_err());
-        assert!(portal.view_cell(90.0, 0.0).is_err());
+        assert!(portal.view_cell(180.0, 1.5, None).is_err());
+        assert!(portal.view_cell(90.0, 0.0, None).is_err());
+        assert!(portal.view_cell(90.0, 1.5, Some(1.0)).is_err());
         // one triangle far out on the axis, one reaching out of the frustum, one inside the
         // kept building, one nearer than `near`
         let tri = |a: [f32; 3], b: [f32; 3], c: [f32; 3]| {
@@ -1084,8 +1125,8 @@ mod tests {
         let object = portal.select(&frame, &scene, &building, 3.0);
         assert_eq!(object, vec![TriRef { mesh: 0, tri: 0 }]);
         let bounds = object_bounds(&scene, &object);
-        let setup =
-            ObjectSetup::through_portal(&portal, 90.0, 1.5, bounds, None, 2e-3).expect("setup");
+        let setup = ObjectSetup::through_portal(&portal, 90.0, 1.5, Some(8.0), bounds, None, 2e-3)
+            .expect("setup");
         assert_eq!(setup.portal, Some(portal));
         assert!((setup.params.t0 - (40.0 - 7.3 + 1.5)).abs() < 1e-6);
         // serialised without a portal, read back as None (older object bundles)
@@ -1095,7 +1136,7 @@ mod tests {
         // an object behind the opening's plane is refused
         let behind = Aabb::new(DVec3::new(4.0, 0.0, -7.0), DVec3::new(6.0, 1.0, -6.0));
         assert!(matches!(
-            ObjectSetup::through_portal(&portal, 90.0, 1.5, behind, None, 2e-3),
+            ObjectSetup::through_portal(&portal, 90.0, 1.5, None, behind, None, 2e-3),
             Err(ObjectError::Overlap(_))
         ));
     }
@@ -1117,7 +1158,7 @@ mod tests {
             let (right, down) = basis(portal.outward);
             let reach = (dmin + along) * (0.5 * angle.to_radians()).tan();
             let eye = portal.center - portal.outward * (dmin + along) + (right * u + down * v) * reach;
-            let cell = portal.view_cell(angle, dmin).expect("cell");
+            let cell = portal.view_cell(angle, dmin, None).expect("cell");
             prop_assert!(cell.contains(eye * (1.0 - 1e-12) + portal.center * 1e-12) || (u.abs().max(v.abs()) > 0.999));
             let w = portal.center + right * (a * hw) + down * (b * hh);
             let x = eye + (w - eye) * lambda;

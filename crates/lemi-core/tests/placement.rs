@@ -296,7 +296,7 @@ fn bad_parameters_are_errors() {
         alpha: deg(0.1),
     };
     assert!(place_object_layers(&obj).is_ok());
-    let mutations: [fn(&mut ObjectParams); 9] = [
+    let mutations: [fn(&mut ObjectParams); 10] = [
         |p| p.t0 = 0.0,
         |p| p.size[1] = -2.0,
         |p| p.res = 0,
@@ -308,6 +308,14 @@ fn bad_parameters_are_errors() {
             p.cell = ObjectCell::Shaft {
                 apex_angle: 0.0,
                 apex_distance: 10.0,
+                reach: None,
+            }
+        },
+        |p| {
+            p.cell = ObjectCell::Shaft {
+                apex_angle: 0.5,
+                apex_distance: 10.0,
+                reach: Some(f64::NAN),
             }
         },
         |p| {
@@ -330,10 +338,36 @@ fn bad_parameters_are_errors() {
     p.cell = ObjectCell::Shaft {
         apex_angle: deg(10.0),
         apex_distance: 60.0,
+        reach: None,
     };
     assert!(place_object_layers(&p).is_err());
+    // a bounded shaft (a room behind a portal) sees points at infinity within α from far enough
+    p.cell = ObjectCell::Shaft {
+        apex_angle: deg(10.0),
+        apex_distance: 60.0,
+        reach: Some(30.0),
+    };
+    let bounded = place_object_layers(&p).expect("a bounded shaft takes an infinitely deep object");
+    assert!(bounded.single_layer_beyond.is_finite());
     p.depth = 20.0;
-    assert!(place_object_layers(&p).is_ok());
+    p.cell = ObjectCell::Shaft {
+        apex_angle: deg(10.0),
+        apex_distance: 60.0,
+        reach: None,
+    };
+    let unbounded = place_object_layers(&p).expect("finite depth");
+    p.cell = ObjectCell::Shaft {
+        apex_angle: deg(10.0),
+        apex_distance: 60.0,
+        reach: Some(30.0),
+    };
+    let bounded = place_object_layers(&p).expect("finite depth, bounded");
+    assert!(
+        bounded.layers.len() <= unbounded.layers.len(),
+        "{} layers for the bounded shaft, {} for the unbounded one",
+        bounded.layers.len(),
+        unbounded.layers.len()
+    );
 }
 
 /// The output-view helpers: the default view (60°, 1280 px) and the resolution warning threshold.

@@ -147,7 +147,15 @@ fn box_views(h: DVec3, extra: u64, seed: u64) -> Vec<DVec3> {
 /// back distance `μ` (on the near border, around the apex and object distances where the parallax
 /// peaks, and far back) the corners and centre of the cross-section (on the near border also the
 /// edge midpoints), plus random interior points with log-distributed `μ`. `far` is the object's far side (from the origin).
-fn shaft_views(s: f64, apex_angle: f64, apex_distance: f64, far: f64, seed: u64) -> Vec<DVec3> {
+fn shaft_views(
+    s: f64,
+    apex_angle: f64,
+    apex_distance: f64,
+    reach: Option<f64>,
+    far: f64,
+    seed: u64,
+) -> Vec<DVec3> {
+    let limit = reach.unwrap_or(f64::INFINITY);
     let tan = (apex_angle / 2.0).tan();
     let scale = s + apex_distance;
     let cross = |mu: f64, x: f64, y: f64| {
@@ -161,7 +169,11 @@ fn shaft_views(s: f64, apex_angle: f64, apex_distance: f64, far: f64, seed: u64)
         backs.push(f * scale);
         backs.push(f * far);
     }
-    for mu in backs {
+    if let Some(r) = reach {
+        backs.push(r);
+        backs.push(0.5 * r);
+    }
+    for mu in backs.into_iter().filter(|&mu| mu <= limit) {
         // The parallax peaks on the cell's boundary, at its corner edges (the centre and, on the
         // near border, the edge midpoints check that).
         for (x, y) in [
@@ -187,7 +199,7 @@ fn shaft_views(s: f64, apex_angle: f64, apex_distance: f64, far: f64, seed: u64)
         (st >> 11) as f64 / (1u64 << 53) as f64
     };
     for _ in 0..8 {
-        let mu = scale * (1e-2f64).powf(1.0 - 4.0 * rnd());
+        let mu = (scale * (1e-2f64).powf(1.0 - 4.0 * rnd())).min(limit);
         v.push(cross(mu, 2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0));
     }
     v
@@ -274,6 +286,8 @@ proptest! {
     #[test]
     fn object_keeps_the_guarantee(
         shaft in any::<bool>(),
+        bounded in any::<bool>(),
+        reach_frac in 0.01f64..3.0,
         nx in 0.5f64..20.0,
         ny in 0.0f64..20.0,
         m in 0.5f64..20.0,
@@ -288,7 +302,12 @@ proptest! {
         seed in any::<u64>(),
     ) {
         let cell = if shaft {
-            ObjectCell::Shaft { apex_angle: beta_deg.to_radians(), apex_distance: t0 + depth / 2.0 }
+            let apex_distance = t0 + depth / 2.0;
+            ObjectCell::Shaft {
+                apex_angle: beta_deg.to_radians(),
+                apex_distance,
+                reach: bounded.then_some(reach_frac * apex_distance),
+            }
         } else {
             ObjectCell::Box { width: [nx, ny], depth: m }
         };
@@ -296,6 +315,13 @@ proptest! {
             ObjectCell::Box { depth, .. } => s_frac * depth,
             ObjectCell::Shaft { .. } => s_frac * cell.near_width()[0],
         };
+        // The TR's premise (sec. 2.1.1): the texture is never magnified, a texel subtends at most
+        // α from the cell (Schaufler's rule); below it the one-texel spacing does not bound the
+        // parallax between layers.
+        let res = res.max(
+            lemi_core::placement::schaufler_res(wx.max(wy), t0, alpha_deg.to_radians())
+                .map_err(|e| TestCaseError::fail(e.to_string()))?,
+        );
         let p = ObjectParams { cell, s, t0, depth, size: [wx, wy], res, alpha: alpha_deg.to_radians() };
         // A tiny object deep inside a very wide cell can need more than MAX_LAYERS layers (by the
         // one-texel spacing alone); that is a documented error, not a broken guarantee.
@@ -312,8 +338,8 @@ proptest! {
                     .map(|v| v + c)
                     .collect()
             }
-            ObjectCell::Shaft { apex_angle, apex_distance } => {
-                shaft_views(s, apex_angle, apex_distance, t0 + depth + s, seed)
+            ObjectCell::Shaft { apex_angle, apex_distance, reach } => {
+                shaft_views(s, apex_angle, apex_distance, reach, t0 + depth + s, seed)
             }
         };
         // Parallax and texel shifts are both checked from the whole cell (for a shaft: its near

@@ -37,8 +37,14 @@ pub enum ObjectCell {
     Box { width: [f64; 2], depth: f64 },
     /// A shaft (TR Fig. 2): apex angle `β` (radians, in x and y), apex on the view axis
     /// `apex_distance` beyond the near border (normally the centre of the object); the cell is the
-    /// part of the shaft behind its near border, unbounded away from the object.
-    Shaft { apex_angle: f64, apex_distance: f64 },
+    /// part of the shaft behind its near border, unbounded away from the object (the TR's), or
+    /// reaching `reach` behind it (a room behind a portal).
+    Shaft {
+        apex_angle: f64,
+        apex_distance: f64,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reach: Option<f64>,
+    },
 }
 
 impl ObjectCell {
@@ -50,6 +56,7 @@ impl ObjectCell {
             ObjectCell::Shaft {
                 apex_angle,
                 apex_distance,
+                ..
             } => [2.0 * apex_distance * (apex_angle / 2.0).tan(); 2],
         }
     }
@@ -154,7 +161,17 @@ impl ObjectParams {
             ObjectCell::Shaft {
                 apex_angle,
                 apex_distance,
+                reach,
             } => {
+                if let Some(r) = reach {
+                    if !(r.is_finite() && r > 0.0) {
+                        return Err(invalid(
+                            "reach",
+                            r,
+                            "a bounded shaft must reach a positive, finite distance behind its near border",
+                        ));
+                    }
+                }
                 if !apex_angle.is_finite()
                     || apex_angle <= 0.0
                     || apex_angle >= std::f64::consts::PI
@@ -242,8 +259,9 @@ impl ShaftRay {
     /// `λ = ℓ − a` the distances along the ray from the foot of `V`, the subtended angle is
     /// `atan(|h|·(ℓ_z − ℓ_l) / (h² + λ_l·λ_z))` (the difference of the two view angles, TR Fig. 7
     /// right), so the condition `tan α·(h² + λ_l·λ_z) − |h|·(ℓ_z − ℓ_l) ≥ 0` is a quadratic in `μ`
-    /// (once for each sign of `h`) whose minimum over `μ ≥ 0` lies at its vertex or at `μ = 0`.
-    fn holds(&self, l: f64, z: f64, ta: f64) -> bool {
+    /// (once for each sign of `h`) whose minimum over `0 ≤ μ ≤ reach` lies at its vertex or at an
+    /// end.
+    fn holds(&self, l: f64, z: f64, ta: f64, reach: f64) -> bool {
         let ll = l * self.len;
         let lam0 = ll - self.a0;
         for sigma in [1.0, -1.0] {
@@ -251,7 +269,12 @@ impl ShaftRay {
                 // Divided by ℓ_z → ∞: tan α·λ_l(μ) − σ·h(μ) ≥ 0, affine in μ.
                 let f0 = ta * lam0 - sigma * self.h0;
                 let f1 = -ta * self.a1 - sigma * self.h1;
-                if f0 < 0.0 || f1 < 0.0 {
+                let end = if reach.is_finite() {
+                    f0 + f1 * reach
+                } else {
+                    f1
+                };
+                if f0 < 0.0 || end < 0.0 {
                     return false;
                 }
                 continue;
@@ -262,8 +285,15 @@ impl ShaftRay {
             let c2 = ta * (self.h1 * self.h1 + self.a1 * self.a1);
             let c1 = ta * (2.0 * self.h0 * self.h1 - self.a1 * (lam0 + mz0)) - sigma * self.h1 * dz;
             let c0 = ta * (self.h0 * self.h0 + lam0 * mz0) - sigma * self.h0 * dz;
-            let min = if c1 < 0.0 && c2 > 0.0 {
+            let vertex = if c2 > 0.0 {
+                -c1 / (2.0 * c2)
+            } else {
+                f64::INFINITY
+            };
+            let min = if vertex > 0.0 && vertex < reach {
                 c0 - c1 * c1 / (4.0 * c2)
+            } else if reach.is_finite() {
+                c0.min(c0 + reach * (c1 + reach * c2))
             } else {
                 c0
             };
@@ -296,9 +326,15 @@ pub fn shaft_reach(t: f64, p: &ObjectParams) -> f64 {
 /// [`shaft_reach`], but at most `cap` (returned at once when the whole shaft allows it, which
 /// saves the bisection when eq. 7 from the near border is the binding bound).
 fn shaft_reach_capped(t: f64, cap: f64, p: &ObjectParams) -> f64 {
-    let ObjectCell::Shaft { apex_distance, .. } = p.cell else {
+    let ObjectCell::Shaft {
+        apex_distance,
+        reach,
+        ..
+    } = p.cell
+    else {
         return cap;
     };
+    let reach = reach.unwrap_or(f64::INFINITY);
     let s = p.s;
     let n = p.cell.near_width();
     let r0 = (n[0] / 2.0).hypot(n[1] / 2.0);
@@ -326,7 +362,7 @@ fn shaft_reach_capped(t: f64, cap: f64, p: &ObjectParams) -> f64 {
     });
     let ta = p.alpha.tan();
     let l = t + s;
-    let ok = |z: f64| rays.iter().all(|r| r.holds(l, z, ta));
+    let ok = |z: f64| rays.iter().all(|r| r.holds(l, z, ta, reach));
     if ok(cap + s) {
         return cap;
     }
@@ -359,12 +395,37 @@ pub fn single_layer_distance(p: &ObjectParams) -> f64 {
         // From far back in the shaft a point at infinity and its projection on a layer are seen
         // about the angle between the ray and the shaft edge apart: one layer suffices only where
         // the exact check allows an infinite range, which is rare.
-        ObjectCell::Shaft { .. } => {
-            if shaft_reach(front.max(p.t0), p).is_infinite() {
-                front
-            } else {
-                f64::INFINITY
+        ObjectCell::Shaft { reach, .. } => {
+            let start = front.max(p.t0);
+            let infinite = |t: f64| shaft_reach(t, p).is_infinite();
+            if infinite(start) {
+                return front;
             }
+            if reach.is_none() {
+                return f64::INFINITY;
+            }
+            // A bounded shaft: a far enough plane keeps points at infinity within α from every
+            // viewpoint (the farthest lateral one at distance h sees them within h/t); the
+            // nearest such plane, by doubling and bisection (the range only grows with t).
+            let mut hi = start.max(1e-9);
+            let mut steps = 0;
+            while !infinite(hi) {
+                hi *= 2.0;
+                steps += 1;
+                if steps > 200 || !hi.is_finite() {
+                    return f64::INFINITY;
+                }
+            }
+            let mut lo = hi / 2.0;
+            while hi - lo > 1e-9 * hi {
+                let mid = 0.5 * (lo + hi);
+                if infinite(mid) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            hi
         }
     }
 }
@@ -402,12 +463,43 @@ pub fn one_texel_spacing_1d(t: f64, n: f64, w: f64, p: &ObjectParams) -> f64 {
                 spacing(t, k * (n * (t0 + s) / w + s * (2.0 / res - 1.0)) - 1.0)
             }
         }
-        ObjectCell::Shaft { apex_angle, .. } => {
+        ObjectCell::Shaft {
+            apex_angle,
+            reach: None,
+            ..
+        } => {
             // Eq. 5: c_s = (t + s) / (res·(1/2 + ((t0 + s)/w)·tan(β/2)) − 1).
             spacing(
                 t + s,
                 res * (0.5 + (t0 + s) / w * (apex_angle / 2.0).tan()) - 1.0,
             )
+        }
+        ObjectCell::Shaft {
+            apex_angle,
+            reach: Some(reach),
+            ..
+        } => {
+            // A bounded shaft: eqs. 2-5 come from one condition, that no viewpoint `V` of the
+            // cell sees a texel of the layer at `a = t + s` (from the reference viewpoint) move
+            // more than a texel against the layer at `a + c`. For the frustum ray of lateral slope
+            // `u` (|u| ≤ k = w/(2(t0 + s))) the two points' shift seen from `V = (v, z)` is
+            // `c·(u·z − v)/(a − z)`, at most `c·(k|z| + |v|)/(a − z)`; against `τ·a` with
+            // `τ = w/(res·(t0 + s))`, one texel at `a` (TR convention, eq. 2):
+            // `c ≤ τ·a·(a − z) / (k|z| + |v| − τ·a)`. Along the cell's edge (`|v|` growing
+            // linearly from n/2 with μ, `z = s − μ`) this ratio of affine functions of μ is
+            // monotone between μ = 0, the kink μ = s and μ = reach, so those three bound it; at
+            // μ = 0 it is eq. 2, for reach → ∞ it tends to eq. 5.
+            let k = w / (2.0 * (t0 + s));
+            let tau = w / (res * (t0 + s));
+            let a = t + s;
+            let grow = (apex_angle / 2.0).tan();
+            let mut c = f64::INFINITY;
+            for mu in [0.0, s.min(reach), reach] {
+                let z = s - mu;
+                let v = n / 2.0 + grow * mu;
+                c = c.min(spacing(tau * a * (a - z), k * z.abs() + v - tau * a));
+            }
+            c
         }
     };
     c_r.min(c_l)
