@@ -184,10 +184,12 @@ fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
         .portals
         .iter()
         .map(|p| {
+            // the layout's f32 values as the decimals they were written as (to the micrometre)
+            let m = |x: f32| (f64::from(x) * 1e6).round() / 1e6 + 0.0;
             let portal = Portal {
-                center: DVec3::from_array(p.center.map(f64::from)),
-                outward: DVec3::from_array(p.outward.map(f64::from)),
-                half: [0.5 * f64::from(p.width), 0.5 * f64::from(p.height)],
+                center: DVec3::from_array(p.center.map(m)),
+                outward: DVec3::from_array(p.outward.map(m)),
+                half: [0.5 * m(p.width), 0.5 * m(p.height)],
             };
             // the farthest corner of the room's walkable box behind the opening
             let far = layout.rooms.get(p.room).map(|r| {
@@ -233,7 +235,9 @@ fn portal_jobs(args: &Args, spec: &str, scene: &Scene, alpha: f64) -> Result<Vec
         };
         let bad = |e: ObjectError| {
             let flag = match e {
-                ObjectError::ViewCell(_) => "--portal/--portal-angle/--portal-distance",
+                ObjectError::ViewCell(_) => {
+                    "--portal/--portal-angle/--portal-distance/--portal-max-distance"
+                }
                 _ => "--portal/--near/--keep",
             };
             anyhow::anyhow!("{flag}: {label} ({}): {e}", portal.describe())
