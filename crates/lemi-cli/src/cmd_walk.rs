@@ -19,7 +19,8 @@ use lemi_walk::{auto_path, CameraPath, WalkEvent, WalkOptions};
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("path_source").required(true).args(["auto", "path"])))]
 pub struct Args {
-    /// The bundle directory.
+    /// The bundle directory, or a directory of portal bundles (`portal-K`, from
+    /// `lemi bake-object --portal all`).
     pub bundle: PathBuf,
     /// Generate a walkthrough of every baked cell plus a flyover inside the baked region.
     #[arg(long)]
@@ -111,10 +112,38 @@ pub fn run(args: Args) -> Result<()> {
             bail!("--fov must be in (0, 180) degrees (got {f})");
         }
     }
-    let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, args.json)?;
+    let portals = portal_bundles(&args.bundle)?;
+    if !portals.is_empty() && args.strategy.is_some() {
+        bail!(
+            "--strategy: {} holds portal impostors, drawn as they were baked",
+            args.bundle.display()
+        );
+    }
+    let first = portals.first().unwrap_or(&args.bundle);
+    let (bundle, scene) = crate::bundle_view::open(first, &args.scene_override, args.json)?;
     let manifest = bundle.manifest().clone();
+    let mut others = Vec::new();
+    for dir in portals.iter().skip(1) {
+        let b = lemi_core::bundle::Bundle::open(dir)
+            .with_context(|| format!("opening the portal bundle {}", dir.display()))?;
+        if b.manifest().scene.fingerprint != manifest.scene.fingerprint {
+            bail!(
+                "{} was baked from another scene than {}",
+                dir.display(),
+                first.display()
+            );
+        }
+        others.push(b);
+    }
     let path = match &args.path {
         Some(p) => CameraPath::read(p)?,
+        None if !portals.is_empty() => {
+            let setups: Vec<_> = std::iter::once(&bundle)
+                .chain(&others)
+                .filter_map(|b| b.manifest().object.clone())
+                .collect();
+            portal_path(&setups, args.walk_speed, args.fps).context("--auto")?
+        }
         None => {
             let baked: Vec<_> = (manifest.cells.iter())
                 .filter_map(|c| manifest.grid.cell_of(c.id).ok())
@@ -149,12 +178,24 @@ pub fn run(args: Args) -> Result<()> {
         scene: scene.clone(),
         materials,
     };
-    let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
-    let mut strategy = lemi_strategy::open(
-        &ctx,
-        kind,
-        streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),
-    )?;
+    let (kind, mut strategy): (_, Box<dyn lemi_strategy::Strategy>) = if portals.is_empty() {
+        let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
+        (
+            kind,
+            lemi_strategy::open(
+                &ctx,
+                kind,
+                streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),
+            )?,
+        )
+    } else {
+        let mut all = vec![bundle.clone()];
+        all.extend(others);
+        let s =
+            lemi_strategy::portal::PortalStrategy::new(&gpu, &scene, ctx.materials.clone(), &all)
+                .context("uploading the portal impostors")?;
+        (lemi_strategy::StrategyKind::Lemi, Box::new(s))
+    };
 
     let unculled = !args.no_geometry && !args.no_unculled;
     let culled = !args.no_geometry && !args.no_culled;
@@ -287,6 +328,77 @@ pub fn run(args: Args) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// The portal bundles in `dir` (`portal-0`, `portal-1`, … in order), or none when `dir` is a
+/// bundle itself or holds no `portal-K` bundle.
+fn portal_bundles(dir: &std::path::Path) -> Result<Vec<PathBuf>> {
+    if dir.join("manifest.json").exists() || !dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let mut found: Vec<(u32, PathBuf)> = Vec::new();
+    let entries = std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))?;
+    for e in entries {
+        let e = e.with_context(|| format!("reading {}", dir.display()))?;
+        let name = e.file_name().to_string_lossy().to_string();
+        if let Some(k) = name
+            .strip_prefix("portal-")
+            .and_then(|k| k.parse::<u32>().ok())
+        {
+            if e.path().join("manifest.json").exists() {
+                found.push((k, e.path()));
+            }
+        }
+    }
+    found.sort();
+    Ok(found.into_iter().map(|(_, p)| p).collect())
+}
+
+/// A walk through portal impostors' view cells: for each, from the far end of its shaft (or 4
+/// near-border distances back when unbounded) toward its near end, along its axis at `speed`,
+/// looking out through the opening; a jump of one frame to the next.
+fn portal_path(
+    setups: &[lemi_core::object_cell::ObjectSetup],
+    speed: f64,
+    fps: f64,
+) -> Result<CameraPath> {
+    let mut keys = Vec::new();
+    let mut t = 0.0;
+    for setup in setups {
+        let lemi_core::object_cell::ObjectViewCell::Shaft {
+            apex,
+            dir,
+            min_distance,
+            max_distance,
+            ..
+        } = setup.cell
+        else {
+            bail!("only portal impostors (shaft view cells) have an automatic walk; give --path");
+        };
+        let far = max_distance.unwrap_or(4.0 * min_distance) * 0.98;
+        let near = min_distance * 1.02;
+        if far <= near {
+            continue;
+        }
+        let yaw = (-dir.x).atan2(dir.z).to_degrees();
+        for (k, along) in [far, near].into_iter().enumerate() {
+            if k == 1 {
+                t += (far - near) / speed;
+            } else if !keys.is_empty() {
+                t += 1.0 / fps;
+            }
+            let eye = apex + dir * along;
+            keys.push(lemi_walk::Key {
+                t,
+                eye: eye.to_array(),
+                yaw_deg: yaw,
+                pitch_deg: 0.0,
+            });
+        }
+    }
+    let path = CameraPath::new(fps, keys);
+    path.validate().context("the portal walk")?;
+    Ok(path)
 }
 
 /// The streaming runtime's options from the flags of `walk` and `view`: cache budget (MiB),

@@ -21,6 +21,7 @@
 pub mod dynamic;
 pub mod hlod;
 pub mod layered;
+pub mod portal;
 pub mod warp;
 
 use std::sync::Arc;

@@ -2,6 +2,7 @@
 //! two quad pipelines (opaque and alpha-tested), the globals and cached render targets, and
 //! renders a cell with or without readback, timing each frame with timestamp queries.
 
+use std::ops::Range;
 use std::sync::Mutex;
 
 use lemi_core::camera::View;
@@ -12,6 +13,7 @@ use super::ImpostorCell;
 use crate::renderer::{
     Frame, GpuTime, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
 };
+use crate::scene::{GpuChunk, GpuMaterials};
 use crate::shading::{vertex_layout, ShadingGlobals, SHADING_WGSL};
 use crate::targets::{PassPart, Targets, LINEAR_COLOR_FORMAT};
 use crate::{Gpu, GpuError};
@@ -230,6 +232,47 @@ impl ImpostorRenderer {
         with_near: bool,
         readback: bool,
     ) -> Result<Option<Frame>, GpuError> {
+        let near = &cell.near;
+        let geometry: Vec<(&GpuChunk, Range<u32>)> = if with_near {
+            near.geometry
+                .chunks()
+                .iter()
+                .map(|c| (c, 0..c.index_count))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        self.draw(&geometry, &near.materials, &[cell], view, options, readback)
+    }
+
+    /// Renders a frame of several parts (portal impostors, TR sec. 3): the index ranges
+    /// `geometry` of uploaded chunks (e.g. the kept ranges of [`crate::CulledGeometry`] culls),
+    /// shaded exactly like [`crate::Renderer`] with `materials`, then the quads of every one of
+    /// `cells` (their own near geometry is not drawn: upload them with an empty near list), all
+    /// depth-tested against each other in one frame. Reads the images back with `readback`
+    /// (otherwise waits for the GPU and returns `None`; [`ImpostorRenderer::last_gpu_ms`] times
+    /// the frame either way).
+    pub fn render_composite(
+        &self,
+        geometry: &[(&GpuChunk, Range<u32>)],
+        materials: &GpuMaterials,
+        cells: &[&ImpostorCell],
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        self.draw(geometry, materials, cells, view, options, readback)
+    }
+
+    fn draw(
+        &self,
+        geometry: &[(&GpuChunk, Range<u32>)],
+        materials: &GpuMaterials,
+        cells: &[&ImpostorCell],
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
         let (width, height) = (view.width, view.height);
         if width == 0 || height == 0 || width > self.max_dim || height > self.max_dim {
             return Err(GpuError::Limit(format!(
@@ -239,32 +282,40 @@ impl ImpostorRenderer {
         }
         let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
         globals.params[1] = QUAD_ALPHA_CUTOFF;
-        let near = &cell.near;
-        for chunk in near.geometry.chunks() {
-            if near.materials.bind_group(chunk.material).is_none() {
+        for (chunk, range) in geometry {
+            if materials.bind_group(chunk.material).is_none() {
                 return Err(GpuError::Invalid(format!(
                     "near geometry uses material {} but only {} materials were uploaded",
                     chunk.material,
-                    near.materials.len()
+                    materials.len()
                 )));
             }
-        }
-        for d in &cell.draws {
-            if cell.page_groups.get(d.page as usize).is_none() {
+            if range.start > range.end || range.end > chunk.index_count {
                 return Err(GpuError::Invalid(format!(
-                    "quads use atlas page {} but only {} were uploaded",
-                    d.page,
-                    cell.page_groups.len()
+                    "index range {range:?} outside a chunk of {} indices",
+                    chunk.index_count
                 )));
             }
         }
-        // RGBA8 or block-compressed pages alike, as long as both decode sRGB or neither does
-        if cell.macro_format.is_srgb() != self.macro_format.is_srgb() && !cell.draws.is_empty() {
-            return Err(GpuError::Invalid(format!(
-                "the cell's macro-textures are {:?} but this renderer draws {:?} ones: the cell was \
-                 uploaded on another device",
-                cell.macro_format, self.macro_format
-            )));
+        for cell in cells {
+            for d in &cell.draws {
+                if cell.page_groups.get(d.page as usize).is_none() {
+                    return Err(GpuError::Invalid(format!(
+                        "quads use atlas page {} but only {} were uploaded",
+                        d.page,
+                        cell.page_groups.len()
+                    )));
+                }
+            }
+            // RGBA8 or block-compressed pages alike, as long as both decode sRGB or neither does
+            if cell.macro_format.is_srgb() != self.macro_format.is_srgb() && !cell.draws.is_empty()
+            {
+                return Err(GpuError::Invalid(format!(
+                    "the cell's macro-textures are {:?} but this renderer draws {:?} ones: the cell was \
+                     uploaded on another device",
+                    cell.macro_format, self.macro_format
+                )));
+            }
         }
         let mut guard = self
             .targets
@@ -289,12 +340,13 @@ impl ImpostorRenderer {
                 "the colour target has no linear view for the quads".into(),
             ));
         }
-        let draw_near = with_near && !near.geometry.chunks().is_empty();
+        let draw_near = !geometry.is_empty();
         let view_proj = view.view_proj();
-        let quads = cell
-            .quad_buffers
-            .as_ref()
-            .filter(|_| !cell.draws.is_empty());
+        let quads: Vec<(&ImpostorCell, &(wgpu::Buffer, wgpu::Buffer))> = cells
+            .iter()
+            .filter(|c| !c.draws.is_empty())
+            .filter_map(|c| c.quad_buffers.as_ref().map(|b| (*c, b)))
+            .collect();
         crate::device::scoped(&self.device, "rendering impostors", || {
             self.queue
                 .write_buffer(&self.globals, 0, bytemuck::bytes_of(&globals));
@@ -306,7 +358,7 @@ impl ImpostorRenderer {
             // Near geometry into the sRGB view; quads into the linear view where macro-textures
             // are linear, so a frame with both takes two passes (the second loads the first's
             // targets, depth included).
-            let two_passes = linear && draw_near && quads.is_some();
+            let two_passes = linear && draw_near && !quads.is_empty();
             let mut pass = targets.begin_pass_part(
                 &mut encoder,
                 "lemi impostor pass",
@@ -322,16 +374,19 @@ impl ImpostorRenderer {
                 pass.set_pipeline(&self.near_pipeline);
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
-                for chunk in near.geometry.chunks() {
+                for (chunk, range) in geometry {
+                    if range.is_empty() {
+                        continue;
+                    }
                     if bound != Some(chunk.material) {
-                        if let Some(g) = near.materials.bind_group(chunk.material) {
+                        if let Some(g) = materials.bind_group(chunk.material) {
                             pass.set_bind_group(1, g, &[]);
                         }
                         bound = Some(chunk.material);
                     }
                     pass.set_vertex_buffer(0, chunk.vertices.slice(..));
                     pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
-                    pass.draw_indexed(0..chunk.index_count, 0, 0..1);
+                    pass.draw_indexed(range.clone(), 0, 0..1);
                 }
             }
             if two_passes {
@@ -344,11 +399,12 @@ impl ImpostorRenderer {
                     true,
                 );
             }
-            if let Some((vertices, indices)) = quads {
+            let mut pipeline = None;
+            for (cell, (vertices, indices)) in &quads {
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 pass.set_vertex_buffer(0, vertices.slice(..));
                 pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
-                let (mut pipeline, mut bound) = (None, None);
+                let mut bound = None;
                 for (d, b) in cell.draws.iter().zip(&cell.bounds) {
                     let Some(g) = cell.page_groups.get(d.page as usize) else {
                         continue;

@@ -1,0 +1,259 @@
+//! Portal impostors at run time (TR-186-2-02-04 sec. 3; Rafferty, Aliaga, Lastra 1998): a scene
+//! seen from inside a building, the outside behind each opening replaced by that opening's object
+//! impostor ([`lemi_core::object_cell::Portal`], `lemi bake-object --portal`) wherever the viewer
+//! stands in the opening's view cell, and drawn as geometry everywhere else.
+//!
+//! **What a frame draws.** Each portal bundle's cell lists as near field every triangle but its
+//! object's, so a triangle's *signature* is the set of portals whose object holds it. The scene is
+//! split by signature into classes (the triangles no portal replaces form one of them), each
+//! uploaded as [`CulledGeometry`] (frustum culled per frame like the `geometry-culled` baseline).
+//! At a viewpoint the *active* portals are those whose view cell holds it; the frame draws every
+//! class no active portal replaces, culled to the view, and the quads of the active portals, all
+//! depth-tested in one frame ([`ImpostorRenderer::render_composite`]). A triangle is therefore
+//! drawn as geometry unless an impostor valid at the viewpoint represents it, and an impostor is
+//! never drawn outside its view cell.
+//!
+//! Why this shows every surface within the impostors' bound: a portal's object is everything
+//! wholly inside its frustum beyond its near distance ([`Portal::select`]), and that frustum holds
+//! every point any viewpoint of its cell sees through the opening, so from inside the cell every
+//! ray through the opening meets either the building (geometry), triangles nearer than the object
+//! or crossing the frustum's side (geometry), or the object (its layers, within α by the
+//! placement). Rays through another opening may meet an active portal's layers too, but only inside
+//! that portal's frustum, where the layers hold everything beyond the near distance: they show
+//! what is there, within α, and geometry nearer along the ray stays nearer.
+//!
+//! [`Portal::select`]: lemi_core::object_cell::Portal::select
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use lemi_core::bundle::Bundle;
+use lemi_core::classify::TriRef;
+use lemi_core::object_cell::{complement, ObjectSetup};
+use lemi_core::Scene;
+use lemi_gpu::{
+    CullOptions, CulledGeometry, Gpu, GpuChunk, GpuMaterials, ImpostorCell, ImpostorRenderer,
+};
+
+use crate::{FrameRequest, Strategy, StrategyError, StrategyFrame, StrategyKind, StrategyReport};
+
+/// One portal impostor, resident.
+struct PortalPart {
+    setup: ObjectSetup,
+    /// Its quads (uploaded without a near list).
+    cell: ImpostorCell,
+}
+
+/// Triangles of one signature, culled per frame.
+struct Class {
+    /// Bit `k`: portal `k`'s object holds these triangles.
+    mask: u64,
+    geometry: CulledGeometry,
+}
+
+/// Portal impostors of one scene, all resident (see the module docs).
+pub struct PortalStrategy {
+    portals: Vec<PortalPart>,
+    classes: Vec<Class>,
+    materials: Arc<GpuMaterials>,
+    renderer: ImpostorRenderer,
+    total_triangles: u64,
+    prepare_seconds: f64,
+    texture_bytes: u64,
+}
+
+impl PortalStrategy {
+    /// Most portals one strategy takes (a signature is a 64-bit mask).
+    pub const MAX_PORTALS: usize = 64;
+
+    /// Uploads the portal impostors `bundles` (object bundles of `scene`, e.g. the
+    /// `portal-K` bundles of `lemi bake-object --portal all`) and the scene split by signature.
+    pub fn new(
+        gpu: &Arc<Gpu>,
+        scene: &Scene,
+        materials: Arc<GpuMaterials>,
+        bundles: &[Bundle],
+    ) -> Result<PortalStrategy, StrategyError> {
+        let t = Instant::now();
+        if bundles.is_empty() || bundles.len() > Self::MAX_PORTALS {
+            return Err(StrategyError::Invalid(format!(
+                "{} portal bundles: give 1 to {}",
+                bundles.len(),
+                Self::MAX_PORTALS
+            )));
+        }
+        let mut signature: Vec<Vec<u64>> = scene
+            .meshes
+            .iter()
+            .map(|m| vec![0; m.triangle_count()])
+            .collect();
+        let mut portals = Vec::with_capacity(bundles.len());
+        let mut texture_bytes = 0;
+        for (k, bundle) in bundles.iter().enumerate() {
+            let what = bundle.dir().display().to_string();
+            let setup = bundle.manifest().object.clone().ok_or_else(|| {
+                StrategyError::Invalid(format!("{what}: not an object impostor's bundle"))
+            })?;
+            let id =
+                bundle.cell_ids().first().copied().ok_or_else(|| {
+                    StrategyError::Invalid(format!("{what}: the bundle has no cell"))
+                })?;
+            let file = bundle
+                .cell(id)
+                .map_err(|e| StrategyError::Invalid(format!("{what}: {e}")))?;
+            let drawn: Vec<TriRef> = file
+                .near
+                .iter()
+                .map(|&[mesh, tri]| TriRef { mesh, tri })
+                .collect();
+            for [m, t] in complement(scene, &drawn) {
+                if let Some(s) = signature
+                    .get_mut(m as usize)
+                    .and_then(|v| v.get_mut(t as usize))
+                {
+                    *s |= 1 << k;
+                }
+            }
+            let mut quads_only = file.clone();
+            quads_only.near.clear();
+            let cell = ImpostorCell::upload_file(gpu, materials.clone(), scene, &quads_only)?;
+            texture_bytes += cell.texture_bytes();
+            portals.push(PortalPart { setup, cell });
+        }
+        let mut by_mask: HashMap<u64, Vec<TriRef>> = HashMap::new();
+        for (m, tris) in signature.iter().enumerate() {
+            for (t, &mask) in tris.iter().enumerate() {
+                by_mask.entry(mask).or_default().push(TriRef {
+                    mesh: m as u32,
+                    tri: t as u32,
+                });
+            }
+        }
+        let mut masks: Vec<u64> = by_mask.keys().copied().collect();
+        masks.sort_unstable();
+        let mut classes = Vec::with_capacity(masks.len());
+        for mask in masks {
+            let tris = &by_mask[&mask];
+            let meshes = scene
+                .extract(tris)
+                .map_err(|e| StrategyError::Invalid(e.to_string()))?;
+            let part = Scene {
+                meshes,
+                ..Default::default()
+            };
+            classes.push(Class {
+                mask,
+                geometry: CulledGeometry::upload(gpu, &part, &CullOptions::default())?,
+            });
+        }
+        Ok(PortalStrategy {
+            portals,
+            classes,
+            materials,
+            renderer: ImpostorRenderer::new(gpu)?,
+            total_triangles: scene.triangle_count(),
+            prepare_seconds: t.elapsed().as_secs_f64(),
+            texture_bytes,
+        })
+    }
+
+    /// The portals whose view cell holds `eye`, as a mask.
+    pub fn active(&self, eye: DVec3) -> u64 {
+        self.portals
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.setup.cell.contains(eye))
+            .fold(0, |m, (k, _)| m | 1 << k)
+    }
+
+    /// How many signature classes the scene was split into.
+    pub fn class_count(&self) -> usize {
+        self.classes.len()
+    }
+}
+
+impl Strategy for PortalStrategy {
+    /// Portal impostors are lemi's layered impostors of objects.
+    fn kind(&self) -> StrategyKind {
+        StrategyKind::Lemi
+    }
+
+    /// Everything is resident from the start: nothing to load.
+    fn preload(
+        &mut self,
+        _eye: DVec3,
+        _velocity: DVec3,
+        _timeout: Duration,
+    ) -> Result<(), StrategyError> {
+        Ok(())
+    }
+
+    fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
+        let active = self.active(r.eye);
+        let view_proj = r.view.view_proj();
+        let mut geometry: Vec<(&GpuChunk, std::ops::Range<u32>)> = Vec::new();
+        let mut near_triangles = 0;
+        for class in self.classes.iter().filter(|c| c.mask & active == 0) {
+            let list = class.geometry.cull(&view_proj);
+            near_triangles += list.triangles;
+            let chunks = class.geometry.chunks();
+            geometry.extend(
+                list.draws
+                    .iter()
+                    .filter_map(|d| chunks.get(d.chunk).map(|c| (c, d.indices.clone()))),
+            );
+        }
+        let cells: Vec<&ImpostorCell> = self
+            .portals
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| active & (1 << k) != 0)
+            .map(|(_, p)| &p.cell)
+            .collect();
+        let quads = cells.iter().map(|c| c.quad_count() as u64).sum();
+        let frame = self
+            .renderer
+            .render_composite(&geometry, &self.materials, &cells, r.view, r.options, true)?
+            .ok_or_else(|| {
+                StrategyError::Invalid("the composite frame was not read back".into())
+            })?;
+        Ok(StrategyFrame {
+            frame,
+            cell: None,
+            near_triangles,
+            far_primitives: quads,
+            stalled: false,
+            fallback: active == 0,
+            cache_bytes: self.texture_bytes,
+            regenerations: 0,
+            warnings: Vec::new(),
+            gpu_ms: self.renderer.last_gpu_ms(),
+            error_px: None,
+        })
+    }
+
+    fn report(&self) -> StrategyReport {
+        StrategyReport {
+            prepare_seconds: self.prepare_seconds,
+            prepared_cells: self.portals.len() as u64,
+            regenerations: 0,
+            stalls: 0,
+            loads: self.portals.len() as u64,
+            evictions: 0,
+            peak_bytes: self.texture_bytes,
+            texture_bytes_per_cell: self.texture_bytes as f64 / self.portals.len().max(1) as f64,
+        }
+    }
+}
+
+impl std::fmt::Debug for PortalStrategy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PortalStrategy")
+            .field("portals", &self.portals.len())
+            .field("classes", &self.classes.len())
+            .field("total_triangles", &self.total_triangles)
+            .finish()
+    }
+}
