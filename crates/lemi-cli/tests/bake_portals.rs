@@ -97,6 +97,30 @@ fn every_opening_bakes_renders_from_its_room_and_is_certified() {
         "--json",
     ]));
     assert!(e.to_string().contains("0_0_0"), "{e}");
+
+    // the walk through every shaft, against all geometry
+    let walk = d.join("walk");
+    let s = json(&lemi(&[
+        "walk",
+        o,
+        "--auto",
+        "--size",
+        "96x64",
+        "--fps",
+        "4",
+        "-o",
+        walk.to_str().unwrap(),
+        "--json",
+    ]));
+    assert!(s["frames"].as_u64().unwrap() > 8, "{s}");
+    assert_eq!(s["stalls"].as_u64(), Some(0), "{s}");
+    assert_eq!(s["loads"].as_u64(), Some(8), "{s}");
+    assert!(s["impostor_median_ms"].as_f64().is_some(), "{s}");
+    assert!(s["culled_median_ms"].as_f64().is_some(), "{s}");
+    assert!(walk.join("frames.csv").exists());
+    // a walk with --strategy makes no sense here
+    let o2 = lemi(&["walk", o, "--auto", "--strategy", "warp"]);
+    assert_clean_error_all(&o2, &["--strategy", "portal"]);
 }
 
 #[test]
