@@ -51,6 +51,32 @@ pub fn object_params(setup: &ObjectSetup, layers: usize, base: &BakeParams) -> B
     }
 }
 
+/// The bake parameters of an object impostor as `lemi bake-object` makes them: [`object_params`]
+/// on the defaults of a cell bake (micro-texture grid 8, threshold 0.6, default layering) with the
+/// output view `fov_deg`/`width` the bundle records and `texture_format`.
+pub fn object_bake_params(
+    setup: &ObjectSetup,
+    layers: usize,
+    (fov_deg, width): (Option<f64>, Option<u32>),
+    texture_format: lemi_core::compress::TextureFormat,
+) -> BakeParams {
+    let base = BakeParams {
+        cell_size: 1.0,
+        cell_height: None,
+        resolution: setup.params.res,
+        target: LayerTarget::Layers(1),
+        faces: vec![Face::PosZ],
+        alpha: setup.params.alpha,
+        output_fov_deg: fov_deg,
+        output_width: width,
+        micro_grid: 8,
+        micro_threshold: 0.6,
+        layering: Default::default(),
+        texture_format,
+    };
+    object_params(setup, layers, &base)
+}
+
 /// Bakes the impostor of the triangles `object` of `scene` for `setup`, with `params` from
 /// [`object_params`]; `on_stage` is told when each stage starts.
 pub fn bake_object(

@@ -18,12 +18,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use lemi_bake::object_bake::{bake_object, object_params, write_object_bundle};
-use lemi_core::bundle::{BakeParams, LayerTarget, SceneRef};
+use lemi_bake::object_bake::{bake_object, object_bake_params, write_object_bundle};
+use lemi_core::bundle::SceneRef;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::TextureFormat;
 use lemi_core::object_cell::{object_bounds, ObjectError, ObjectSetup, ObjectViewCell, Portal};
-use lemi_core::{Aabb, Face, Scene};
+use lemi_core::{Aabb, Scene};
 use lemi_gpu::{BackendChoice, Gpu};
 use serde_json::json;
 
@@ -439,25 +439,15 @@ fn bake_job(
 ) -> Result<serde_json::Value> {
     let setup = &job.setup;
     let bounds = job.bounds;
-    let alpha = setup.params.alpha;
     let placement = setup
         .place()
         .map_err(|e| anyhow::anyhow!("{}: {}: {e}", job.label, flag_of(&e)))?;
-    let base = BakeParams {
-        cell_size: 1.0,
-        cell_height: None,
-        resolution: setup.params.res,
-        target: LayerTarget::Layers(1),
-        faces: vec![Face::PosZ],
-        alpha,
-        output_fov_deg: fov,
-        output_width: width,
-        micro_grid: 8,
-        micro_threshold: 0.6,
-        layering: Default::default(),
-        texture_format: args.texture_format,
-    };
-    let params = object_params(setup, placement.layers.len(), &base);
+    let params = object_bake_params(
+        setup,
+        placement.layers.len(),
+        (fov, width),
+        args.texture_format,
+    );
     params
         .validate()
         .map_err(|e| anyhow::anyhow!("{}: {e} (the object's setup)", job.label))?;

@@ -23,12 +23,12 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
-use lemi_bake::object_bake::{bake_object, object_params, write_object_bundle};
-use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
+use lemi_bake::object_bake::{bake_object, object_bake_params, write_object_bundle};
+use lemi_core::bundle::{Bundle, SceneRef};
 use lemi_core::classify::TriRef;
 use lemi_core::object_cell::{object_bounds, ObjectSetup, ObjectViewCell};
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
-use lemi_core::{Aabb, Face, Scene};
+use lemi_core::{Aabb, Scene};
 use lemi_eval::{camera, evaluate_bundle, layered_crack_tolerance, side_by_side, EvalOptions};
 use lemi_gpu::{
     BackendChoice, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer, RenderOptions,
@@ -175,21 +175,12 @@ fn main() -> Result<()> {
         };
         let setup = ObjectSetup::new(cell, bounds, None, alpha)?;
         let placement = setup.place()?;
-        let base = BakeParams {
-            cell_size: CELL,
-            cell_height: None,
-            resolution: setup.params.res,
-            target: LayerTarget::Layers(1),
-            faces: vec![Face::PosZ],
-            alpha,
-            output_fov_deg: Some(FOV_X),
-            output_width: Some(args.width),
-            micro_grid: 8,
-            micro_threshold: 0.6,
-            layering: Default::default(),
-            texture_format: Default::default(),
-        };
-        let params = object_params(&setup, placement.layers.len(), &base);
+        let params = object_bake_params(
+            &setup,
+            placement.layers.len(),
+            (Some(FOV_X), Some(args.width)),
+            Default::default(),
+        );
         let t = Instant::now();
         let mut baked = bake_object(&gpu, &scene, &object, &setup, params.clone(), |_| {})?;
         let bake_s = t.elapsed().as_secs_f64();

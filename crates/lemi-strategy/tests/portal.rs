@@ -18,11 +18,11 @@ use std::path::Path;
 use std::sync::Arc;
 
 use glam::DVec3;
-use lemi_bake::object_bake::{bake_object, object_params, write_object_bundle};
-use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
+use lemi_bake::object_bake::{bake_object, object_bake_params, write_object_bundle};
+use lemi_core::bundle::{Bundle, LayerTarget, SceneRef};
 use lemi_core::camera::{Camera, View};
 use lemi_core::object_cell::{object_bounds, ObjectSetup, Portal};
-use lemi_core::{Aabb, Face, Scene};
+use lemi_core::{Aabb, Scene};
 use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
 use lemi_strategy::portal::PortalStrategy;
 use lemi_strategy::{FrameRequest, Strategy};
@@ -42,21 +42,12 @@ fn bake(gpu: &Gpu, scene: &Scene, portal: &Portal, max: f64, dir: &Path) -> Bund
     let setup = ObjectSetup::through_portal(portal, 60.0, 1.5, Some(max), bounds, None, alpha)
         .expect("setup");
     let placement = setup.place().expect("placement");
-    let base = BakeParams {
-        cell_size: 1.0,
-        cell_height: None,
-        resolution: setup.params.res,
-        target: LayerTarget::Layers(1),
-        faces: vec![Face::PosZ],
-        alpha,
-        output_fov_deg: None,
-        output_width: None,
-        micro_grid: 8,
-        micro_threshold: 0.6,
-        layering: Default::default(),
-        texture_format: Default::default(),
-    };
-    let params = object_params(&setup, placement.layers.len(), &base);
+    let params = object_bake_params(
+        &setup,
+        placement.layers.len(),
+        (None, None),
+        Default::default(),
+    );
     let mut baked = bake_object(gpu, scene, &object, &setup, params.clone(), |_| {}).expect("bake");
     let scene_ref = SceneRef {
         sources: vec!["builtin:interior:20k:1".into()],

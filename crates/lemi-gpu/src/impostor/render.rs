@@ -242,7 +242,7 @@ impl ImpostorRenderer {
         } else {
             Vec::new()
         };
-        self.draw(&geometry, &near.materials, &[cell], view, options, readback)
+        self.render_composite(&geometry, &near.materials, &[cell], view, options, readback)
     }
 
     /// Renders a frame of several parts (portal impostors, TR sec. 3): the index ranges
@@ -253,18 +253,6 @@ impl ImpostorRenderer {
     /// (otherwise waits for the GPU and returns `None`; [`ImpostorRenderer::last_gpu_ms`] times
     /// the frame either way).
     pub fn render_composite(
-        &self,
-        geometry: &[(&GpuChunk, Range<u32>)],
-        materials: &GpuMaterials,
-        cells: &[&ImpostorCell],
-        view: &View,
-        options: &RenderOptions,
-        readback: bool,
-    ) -> Result<Option<Frame>, GpuError> {
-        self.draw(geometry, materials, cells, view, options, readback)
-    }
-
-    fn draw(
         &self,
         geometry: &[(&GpuChunk, Range<u32>)],
         materials: &GpuMaterials,
