@@ -511,7 +511,9 @@ pub(crate) fn parse(
                 }
             }
             progress(el.count, el.count);
-        } else {
+        } else if !el.props.is_empty() {
+            // (an element without properties takes no bytes: nothing to skip, however many
+            // items it declares; looping over them was a hang found by fuzzing)
             for item in 0..el.count {
                 for p in &el.props {
                     let ok = match p.kind {
