@@ -80,6 +80,11 @@ pub struct Args {
     /// starts one cell width beyond the opening.
     #[arg(long, requires = "portal")]
     pub near: Option<f64>,
+    /// The room behind an opening given with --portal: its view cell is the part of the shaft
+    /// inside this box `x0,y0,z0,x1,y1,z1` (default with `--portal all`: the opening's room;
+    /// otherwise the whole shaft).
+    #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true, requires = "portal")]
+    pub portal_room: Option<Aabb>,
     /// Triangles wholly inside this box `x0,y0,z0,x1,y1,z1` stay geometry (the building the
     /// rooms are in). Default with `--portal all`: the built-in building's box.
     #[arg(long, value_parser = crate::cmd_bake::parse_region, allow_hyphen_values = true, requires = "portal")]
@@ -186,17 +191,20 @@ fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
         .map(|p| {
             // the layout's f32 values as the decimals they were written as (to the micrometre)
             let m = |x: f32| (f64::from(x) * 1e6).round() / 1e6 + 0.0;
+            let room = layout.rooms.get(p.room).map(|r| {
+                Aabb::new(
+                    DVec3::from_array(r.min.map(m)),
+                    DVec3::from_array(r.max.map(m)),
+                )
+            });
             let portal = Portal {
                 center: DVec3::from_array(p.center.map(m)),
                 outward: DVec3::from_array(p.outward.map(m)),
                 half: [0.5 * m(p.width), 0.5 * m(p.height)],
+                room,
             };
             // the farthest corner of the room's walkable box behind the opening
-            let far = layout.rooms.get(p.room).map(|r| {
-                let room = Aabb::new(
-                    DVec3::from_array(r.min.map(f64::from)),
-                    DVec3::from_array(r.max.map(f64::from)),
-                );
+            let far = room.map(|room| {
                 lemi_core::object_cell::box_corners(&room)
                     .iter()
                     .map(|c| (portal.center - *c).dot(portal.outward))
@@ -228,6 +236,10 @@ fn portal_jobs(args: &Args, spec: &str, scene: &Scene, alpha: f64) -> Result<Vec
     let mut jobs = Vec::new();
     for (k, (portal, room_far)) in portals.iter().enumerate() {
         let max = args.portal_max_distance.or(*room_far);
+        let portal = &Portal {
+            room: args.portal_room.or(portal.room),
+            ..*portal
+        };
         let label = if many {
             format!("portal {k}")
         } else {

@@ -86,6 +86,7 @@ impl Geometry {
                     angle_deg: angle,
                     min_distance: apex_distance,
                     max_distance: None,
+                    within: None,
                 }
             }
         };

@@ -184,6 +184,7 @@ fn object_placement_in_process(
                 angle_deg: a,
                 min_distance: apex,
                 max_distance: None,
+                within: None,
             }
         }
     };

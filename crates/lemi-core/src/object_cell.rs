@@ -74,6 +74,11 @@ pub enum ObjectViewCell {
         min_distance: f64,
         #[serde(default, skip_serializing_if = "Option::is_none")]
         max_distance: Option<f64>,
+        /// The part of the shaft inside this box only (a portal's room: viewpoints under the
+        /// floor or beyond a side wall are not served). The placement is the whole shaft's, so
+        /// the guarantee holds in any part of it.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        within: Option<Aabb>,
     },
 }
 
@@ -143,6 +148,7 @@ impl ObjectViewCell {
                     angle_deg: v[6],
                     min_distance: v[7],
                     max_distance: v.get(8).copied(),
+                    within: None,
                 }
             }
             k => return Err(bad(format!("`{k}` is not a view-cell kind (box or shaft)"))),
@@ -176,7 +182,15 @@ impl ObjectViewCell {
                 angle_deg,
                 min_distance,
                 max_distance,
+                within,
             } => {
+                if let Some(b) = within {
+                    if b.is_empty() || !b.min.is_finite() || !b.max.is_finite() {
+                        return bad(
+                            "the box the shaft is clipped to must be finite and not empty".into(),
+                        );
+                    }
+                }
                 if let Some(max) = max_distance {
                     if !(max.is_finite() && max > min_distance) {
                         return bad(format!(
@@ -216,6 +230,7 @@ impl ObjectViewCell {
                 angle_deg,
                 min_distance,
                 max_distance,
+                ..
             } => format!(
                 "shaft:{},{},{angle_deg},{min_distance}{}",
                 v(apex),
@@ -235,7 +250,11 @@ impl ObjectViewCell {
                 angle_deg,
                 min_distance,
                 max_distance,
+                within,
             } => {
+                if within.is_some_and(|b| !b.contains(p)) {
+                    return false;
+                }
                 let r = p - apex;
                 let along = r.dot(dir);
                 if along.is_nan() || along < min_distance || max_distance.is_some_and(|m| along > m)
@@ -272,7 +291,19 @@ impl ObjectViewCell {
                 angle_deg,
                 min_distance,
                 max_distance,
+                within,
             } => {
+                // a point of the shaft's cross-section moved into `within` (clamped, which keeps
+                // it in the cross-section when the box holds the axis point), if it is then in
+                // the cell
+                let cell = *self;
+                let fit = move |p: DVec3| -> Option<DVec3> {
+                    let q = match within {
+                        Some(b) => p.clamp(b.min, b.max),
+                        None => p,
+                    };
+                    cell.contains(q).then_some(q)
+                };
                 let (right, down) = basis(-dir);
                 let tan = (0.5 * angle_deg.to_radians()).tan() * (1.0 - 1e-9);
                 let near_width = 2.0 * min_distance * tan;
@@ -302,18 +333,23 @@ impl ObjectViewCell {
                 let farthest = sections.last().map_or(0.0, |s| s.1);
                 for (name, back) in sections {
                     let along = near + back;
-                    out.push((format!("{name} centre"), at(along, 0.0, 0.0)));
+                    let mut push = |label: String, p: DVec3| {
+                        if let Some(q) = fit(p) {
+                            out.push((label, q));
+                        }
+                    };
+                    push(format!("{name} centre"), at(along, 0.0, 0.0));
                     for (k, (u, v)) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
                         .into_iter()
                         .enumerate()
                     {
-                        out.push((format!("{name} corner {k}"), at(along, u, v)));
+                        push(format!("{name} corner {k}"), at(along, u, v));
                     }
                     for (k, (u, v)) in [(0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (-1.0, 0.0)]
                         .into_iter()
                         .enumerate()
                     {
-                        out.push((format!("{name} edge {k}"), at(along, u, v)));
+                        push(format!("{name} edge {k}"), at(along, u, v));
                     }
                 }
                 let mut x = seed ^ 0x9e37_79b9_7f4a_7c15;
@@ -324,9 +360,18 @@ impl ObjectViewCell {
                     (x >> 11) as f64 / (1u64 << 53) as f64
                 };
                 for k in 0..random {
-                    let along = near + farthest * next();
-                    let (u, v) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
-                    out.push((format!("random {k}"), at(along, u, v)));
+                    // rejection sampling inside `within` (64 tries, then the clamped point)
+                    for attempt in 0..64 {
+                        let along = near + farthest * next();
+                        let (u, v) = (2.0 * next() - 1.0, 2.0 * next() - 1.0);
+                        let p = at(along, u, v);
+                        if within.is_none_or(|b| b.contains(p)) || attempt == 63 {
+                            if let Some(q) = fit(p) {
+                                out.push((format!("random {k}"), q));
+                            }
+                            break;
+                        }
+                    }
                 }
                 out
             }
@@ -408,6 +453,10 @@ pub struct Portal {
     pub center: DVec3,
     pub outward: DVec3,
     pub half: [f64; 2],
+    /// The room behind the opening, where its viewers stand: the view cell is the shaft's part
+    /// inside it (`None`: the whole shaft).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub room: Option<Aabb>,
 }
 
 impl Portal {
@@ -425,6 +474,7 @@ impl Portal {
             center: DVec3::new(v[0], v[1], v[2]),
             outward: if n.length() > 0.0 { n.normalize() } else { n },
             half: [0.5 * v[6], 0.5 * v[7]],
+            room: None,
         };
         p.validate()?;
         Ok(p)
@@ -488,6 +538,7 @@ impl Portal {
             angle_deg,
             min_distance,
             max_distance,
+            within: self.room,
         };
         cell.validate()?;
         Ok(cell)
@@ -634,6 +685,7 @@ impl ObjectSetup {
                 angle_deg,
                 min_distance,
                 max_distance,
+                ..
             } => {
                 let tr = ObjectCell::Shaft {
                     apex_angle: angle_deg.to_radians(),
@@ -1133,6 +1185,29 @@ mod tests {
         let json = serde_json::to_string(&setup).expect("json");
         let back: ObjectSetup = serde_json::from_str(&json).expect("back");
         assert_eq!(back, setup);
+        // clipped to the room: viewpoints under the floor or in the next room are not in the cell,
+        // and every judged viewpoint is in the room
+        let room = Aabb::new(DVec3::new(12.5, 0.45, -6.8), DVec3::new(19.9, 2.85, -0.4));
+        let roomed = Portal {
+            center: DVec3::new(16.2, 1.75, -7.3),
+            room: Some(room),
+            ..portal
+        };
+        let cell = roomed.view_cell(90.0, 1.5, Some(6.9)).expect("cell");
+        assert!(cell.contains(DVec3::new(16.2, 1.75, -3.0)));
+        assert!(
+            !cell.contains(DVec3::new(16.2, -0.5, -1.0)),
+            "under the floor"
+        );
+        assert!(
+            !cell.contains(DVec3::new(21.0, 1.75, -1.0)),
+            "beyond the side wall"
+        );
+        let views = cell.eval_viewpoints(16, 5);
+        assert!(views.len() >= 16 + 3, "{}", views.len());
+        for (label, p) in &views {
+            assert!(room.contains(*p) && cell.contains(*p), "{label} {p}");
+        }
         // an object behind the opening's plane is refused
         let behind = Aabb::new(DVec3::new(4.0, 0.0, -7.0), DVec3::new(6.0, 1.0, -6.0));
         assert!(matches!(
@@ -1152,7 +1227,7 @@ mod tests {
         ) {
             let n = DVec3::new(nx, ny, nz);
             prop_assume!(n.length() > 0.1);
-            let portal = Portal { center: DVec3::new(1.0, 2.0, 3.0), outward: n.normalize(), half: [hw, hh] };
+            let portal = Portal { center: DVec3::new(1.0, 2.0, 3.0), outward: n.normalize(), half: [hw, hh], room: None };
             let frame = portal.frame(angle, dmin).expect("frame");
             // a viewpoint of the shaft cell, a point of the opening, a point beyond it on the ray
             let (right, down) = basis(portal.outward);
