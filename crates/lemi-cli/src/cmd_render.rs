@@ -412,9 +412,46 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The cells of the object bundles `paths` (`--with-object`): each must be an object bundle
+/// baked from the scene of `opened`, with its textures in the same format.
+pub fn object_cells(
+    opened: &lemi_core::bundle::Bundle,
+    paths: &[PathBuf],
+) -> anyhow::Result<Vec<lemi_core::bundle::CellFile>> {
+    let mut cells = Vec::new();
+    for path in paths {
+        let b = lemi_core::bundle::Bundle::open(path)
+            .with_context(|| format!("--with-object {}", path.display()))?;
+        if b.manifest().object.is_none() {
+            bail!(
+                "--with-object {}: not an object bundle (bake it with lemi bake-object)",
+                path.display()
+            );
+        }
+        b.expect_scene(&opened.manifest().scene.fingerprint)
+            .with_context(|| format!("--with-object {}", path.display()))?;
+        let id = b.cell_ids().first().copied().ok_or_else(|| {
+            anyhow::anyhow!("--with-object {}: the bundle has no cell", path.display())
+        })?;
+        let f = b
+            .cell(id)
+            .with_context(|| format!("--with-object {}", path.display()))?;
+        let want = opened.manifest().params.texture_format;
+        if f.header.texture_format != want {
+            bail!(
+                "--with-object {}: its textures are {}, the bundle's {} (bake both with the same --texture-format)",
+                path.display(),
+                f.header.texture_format,
+                want
+            );
+        }
+        cells.push(f);
+    }
+    Ok(cells)
+}
+
 /// The cell `file` of `opened` composed with the object bundles `paths` whose view cell holds
-/// `eye` (`lemi_core::object_cell::compose_objects`), and how many were composed. Each object
-/// bundle must be an object bundle baked from the same scene.
+/// `eye` (`lemi_core::object_cell::compose_objects`), and how many were composed.
 fn with_objects(
     opened: &lemi_core::bundle::Bundle,
     file: lemi_core::bundle::CellFile,
@@ -424,25 +461,15 @@ fn with_objects(
     if paths.is_empty() {
         return Ok((file, 0));
     }
-    let mut cells = Vec::new();
-    for path in paths {
-        let b = lemi_core::bundle::Bundle::open(path)
-            .with_context(|| format!("--with-object {}", path.display()))?;
-        let Some(o) = &b.manifest().object else {
-            bail!(
-                "--with-object {}: not an object bundle (bake it with lemi bake-object)",
-                path.display()
-            );
-        };
-        b.expect_scene(&opened.manifest().scene.fingerprint)
-            .with_context(|| format!("--with-object {}", path.display()))?;
-        if o.cell.contains(eye) {
-            let (_, f) = b
-                .cell_at(eye)
-                .with_context(|| format!("--with-object {}", path.display()))?;
-            cells.push(f);
-        }
-    }
+    let cells: Vec<_> = object_cells(opened, paths)?
+        .into_iter()
+        .filter(|f| {
+            f.header
+                .object
+                .as_ref()
+                .is_some_and(|o| o.cell.contains(eye))
+        })
+        .collect();
     let refs: Vec<&lemi_core::bundle::CellFile> = cells.iter().collect();
     lemi_core::object_cell::compose_objects(&file, &refs)
         .map_err(|e| anyhow::anyhow!("--with-object: {e}"))

@@ -81,6 +81,11 @@ pub struct Args {
     /// default), warp or dynamic (built at run time from the bundle's cells and near lists).
     #[arg(long)]
     pub strategy: Option<String>,
+    /// An object impostor's bundle (`lemi bake-object`, repeatable) drawn with the bundle's cells:
+    /// in every cell its view cell holds whole, the object is drawn as its impostor instead of its
+    /// triangles; elsewhere as geometry.
+    #[arg(long, value_name = "OBJECT_BUNDLE")]
+    pub with_object: Vec<PathBuf>,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -113,6 +118,12 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let portals = portal_bundles(&args.bundle)?;
+    if !portals.is_empty() && !args.with_object.is_empty() {
+        bail!(
+            "--with-object: {} holds portal impostors, which are drawn on their own",
+            args.bundle.display()
+        );
+    }
     if !portals.is_empty() && args.strategy.is_some() {
         bail!(
             "--strategy: {} holds portal impostors, drawn as they were baked",
@@ -180,14 +191,16 @@ pub fn run(args: Args) -> Result<()> {
     };
     let (kind, mut strategy): (_, Box<dyn lemi_strategy::Strategy>) = if portals.is_empty() {
         let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
-        (
-            kind,
-            lemi_strategy::open(
-                &ctx,
-                kind,
-                streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall),
-            )?,
-        )
+        let mut streamer =
+            streamer_options(args.cache_mb, args.upload_kb, args.max_speed, args.stall);
+        if !args.with_object.is_empty() {
+            if !kind.is_layered() {
+                bail!("--with-object: object impostors are drawn with layered bundles, not {kind}");
+            }
+            streamer.loader.objects =
+                Arc::new(crate::cmd_render::object_cells(&bundle, &args.with_object)?);
+        }
+        (kind, lemi_strategy::open(&ctx, kind, streamer)?)
     } else {
         let mut all = vec![bundle.clone()];
         all.extend(others);

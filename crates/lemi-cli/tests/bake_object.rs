@@ -217,3 +217,102 @@ fn bad_view_cells_and_objects_are_clear_errors_naming_the_flag() {
     let r = json(&o);
     assert!(r["object_triangles"].as_u64().unwrap() > 100, "{r}");
 }
+
+/// `lemi walk --with-object`: an object impostor whose view cell holds a whole cell of an
+/// environment-map bundle replaces the object's triangles in that cell's near field while the
+/// walk streams it: the frames draw the object's quads and fewer triangles than without it.
+#[test]
+fn a_walk_draws_an_object_impostor_in_the_cells_its_view_cell_holds() {
+    let d = tmp("cli-object", "walk");
+    let cells = d.join("cells");
+    let object = d.join("object");
+    let (c, o) = (cells.to_str().unwrap(), object.to_str().unwrap());
+    // one 10 m cell on the avenue, one layer (a near field far out, holding the buildings)
+    let bake = lemi(&[
+        "bake",
+        SCENE,
+        "--region",
+        "40,1.7,-5,50,1.7,5",
+        "--cell-size",
+        "10",
+        "--resolution",
+        "64",
+        "--layers",
+        "1",
+        "--alpha-deg",
+        "0.5",
+        "-o",
+        c,
+    ]);
+    assert!(bake.status.success(), "{}", stderr(&bake));
+    // the buildings from a view cell holding that cell whole
+    json(&lemi(&[
+        "bake-object",
+        SCENE,
+        "-o",
+        o,
+        "--object",
+        OBJECT,
+        "--view-cell",
+        "box:34,-4,-6,56,7,6",
+        "--alpha-deg",
+        "0.5",
+        "--json",
+    ]));
+    let walk = |with: bool, out: &str| {
+        let dir = d.join(out);
+        let mut args = vec![
+            "walk",
+            c,
+            "--auto",
+            "--size",
+            "96x64",
+            "--fps",
+            "4",
+            "--no-geometry",
+            "-o",
+            dir.to_str().unwrap(),
+            "--json",
+        ];
+        if with {
+            args.extend_from_slice(&["--with-object", o]);
+        }
+        let s = json(&lemi(&args));
+        assert_eq!(s["stalls"].as_u64(), Some(0), "{s}");
+        let csv = std::fs::read_to_string(dir.join("frames.csv")).expect("frames.csv");
+        let head = csv.lines().next().expect("header").split(',');
+        let col = |name: &str| head.clone().position(|h| h == name).expect(name);
+        let (tri, quads) = (col("near_triangles"), col("impostor_quads"));
+        let rows: Vec<Vec<u64>> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                vec![f[tri].parse().unwrap(), f[quads].parse().unwrap()]
+            })
+            .collect();
+        let max = |i: usize| rows.iter().map(|r| r[i]).max().unwrap_or(0);
+        (max(0), max(1))
+    };
+    let (tri_without, quads_without) = walk(false, "walk-without");
+    let (tri_with, quads_with) = walk(true, "walk-with");
+    assert!(
+        quads_with > quads_without,
+        "{quads_with} quads with, {quads_without} without"
+    );
+    assert!(
+        tri_with < tri_without,
+        "{tri_with} triangles with, {tri_without} without"
+    );
+    // only layered bundles take object impostors
+    let o2 = lemi(&[
+        "walk",
+        c,
+        "--auto",
+        "--strategy",
+        "dynamic",
+        "--with-object",
+        o,
+    ]);
+    assert_clean_error_all(&o2, &["--with-object"]);
+}

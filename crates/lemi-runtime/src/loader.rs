@@ -51,6 +51,11 @@ pub struct LoaderOptions {
     /// ([`ImpostorCellData::with_blocks`]), else decoded to RGBA8. The streamer sets it from its
     /// GPU.
     pub block_formats: bool,
+    /// Object impostors (object bundles' cells) to draw with the cells: an object whose view
+    /// cell holds the whole of a cell replaces its triangles in that cell's near field
+    /// ([`lemi_core::object_cell::compose_objects`]); elsewhere the object stays geometry, so no
+    /// viewpoint of the cell sees an impostor outside its guarantee.
+    pub objects: Arc<Vec<CellFile>>,
 }
 
 impl Default for LoaderOptions {
@@ -60,6 +65,7 @@ impl Default for LoaderOptions {
             delay: Duration::ZERO,
             texture_side: lemi_gpu::DEFAULT_PAGE_SIDE,
             block_formats: false,
+            objects: Arc::new(Vec::new()),
         }
     }
 }
@@ -118,6 +124,7 @@ struct Context {
     delay: Duration,
     texture_side: u32,
     block_formats: bool,
+    objects: Arc<Vec<CellFile>>,
 }
 
 struct Shared {
@@ -164,6 +171,7 @@ impl Loader {
                 delay: options.delay,
                 texture_side: options.texture_side,
                 block_formats: options.block_formats,
+                objects: options.objects.clone(),
             },
         });
         let (tx, results) = mpsc::channel();
@@ -321,6 +329,41 @@ fn cell_error(ctx: &Context, id: CellId, message: String) -> RuntimeError {
     }
 }
 
+/// `file` (cell `id`) with the object impostors whose view cell holds the whole cell
+/// ([`LoaderOptions::objects`]).
+fn with_objects(ctx: &Context, id: CellId, file: CellFile) -> Result<CellFile, String> {
+    if ctx.objects.is_empty() {
+        return Ok(file);
+    }
+    let cell = ctx
+        .bundle
+        .manifest()
+        .grid
+        .cell_of(id)
+        .map_err(|e| e.to_string())?;
+    // view cells are convex (a box, a shaft, a shaft clipped to a box): the corners decide
+    let corners = lemi_core::object_cell::box_corners(&lemi_core::Aabb::new(
+        cell.center - cell.half,
+        cell.center + cell.half,
+    ));
+    let holding: Vec<&CellFile> = ctx
+        .objects
+        .iter()
+        .filter(|o| {
+            o.header
+                .object
+                .as_ref()
+                .is_some_and(|s| corners.iter().all(|c| s.cell.contains(*c)))
+        })
+        .collect();
+    if holding.is_empty() {
+        return Ok(file);
+    }
+    lemi_core::object_cell::compose_objects(&file, &holding)
+        .map(|(f, _)| f)
+        .map_err(|e| format!("with object impostors: {e}"))
+}
+
 /// Reads, verifies (through the bundle's one reader) and decodes one cell.
 fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeError> {
     let err = |m: String| cell_error(ctx, id, m);
@@ -333,6 +376,7 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
                 message: e.kind.to_string(),
             })?;
     let path = ctx.bundle.cell_path(id);
+    let file = with_objects(ctx, id, file).map_err(err)?;
     let blocks = match file.block_macros() {
         Ok(Some(b)) if ctx.block_formats => Some(b),
         Ok(_) => None,
