@@ -588,3 +588,35 @@ property list uchar int vertex_indices\nend_header\n"
     let (s, _) = ok(&path);
     assert_eq!(s.triangle_count(), 1);
 }
+
+/// Two inputs tobj 4.0 panics on instead of reporting (found by AFL++ on the `obj` target; the
+/// inputs are in `fuzz/regressions/obj/`): a face index counting back past the first vertex (an
+/// arithmetic overflow inside tobj) is an error naming the line, and an MTL colour with fewer
+/// than three numbers (an `unwrap` inside tobj) leaves the library unread with a warning.
+#[test]
+fn obj_indices_past_their_elements_and_short_mtl_colours_are_reported() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obj = dir.path().join("bad.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/-9 3/1\n").expect("write");
+    let msg = load_path(&obj, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(msg.contains("bad.obj") && msg.contains("line 5"), "{msg}");
+    assert!(msg.contains("texture coordinate index `-9`"), "{msg}");
+
+    let obj = dir.path().join("short.obj");
+    std::fs::write(
+        &obj,
+        "mtllib short.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n",
+    )
+    .expect("write");
+    std::fs::write(dir.path().join("short.mtl"), "newmtl red\nKd 1 0\n").expect("write");
+    let (s, report) = ok(&obj);
+    assert_eq!(s.triangle_count(), 1);
+    let warnings = format!("{report:?}");
+    assert!(
+        warnings.contains("short.mtl") && warnings.contains("line 2"),
+        "{warnings}"
+    );
+}

@@ -23,6 +23,9 @@ pub(super) fn load(
     report: &mut ImportReport,
 ) -> Result<(), SceneError> {
     let bytes = read_file(path)?;
+    if let Some(e) = bad_face_index(&bytes) {
+        return Err(malformed(path, format!("OBJ: {e}")));
+    }
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     // Directories of the MTL libraries tobj asked for, to resolve texture paths.
     let mtl_dirs: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
@@ -41,14 +44,27 @@ pub(super) fn load(
             }
             // Only a regular file: `mtllib /dev/zero` must not be an endless read.
             let r = if full.is_file() {
-                tobj::load_mtl(&full)
+                match std::fs::read(&full) {
+                    Ok(mtl) => match short_colour(&mtl) {
+                        Some(line) => Err(format!(
+                            "line {line}: a colour (Ka, Kd, Ks, Ke) needs three numbers"
+                        )),
+                        None => tobj::load_mtl_buf(&mut mtl.as_slice()).map_err(|e| e.to_string()),
+                    },
+                    Err(e) => Err(e.to_string()),
+                }
             } else {
-                Err(tobj::LoadError::OpenFileFailed)
+                Err(tobj::LoadError::OpenFileFailed.to_string())
             };
-            if let (Err(e), Ok(mut errs)) = (&r, mtl_errors.lock()) {
-                errs.push(format!("material library {}: {e}", full.display()));
+            match r {
+                Ok(m) => Ok(m),
+                Err(e) => {
+                    if let Ok(mut errs) = mtl_errors.lock() {
+                        errs.push(format!("material library {}: {e}", full.display()));
+                    }
+                    Err(tobj::LoadError::MaterialParseError)
+                }
             }
-            r
         })
         .map_err(|e| malformed(path, format!("OBJ: {e}")))?;
     let mut dirs = mtl_dirs.into_inner().unwrap_or_default();
@@ -217,4 +233,58 @@ pub(crate) fn mtllib_paths(obj: &[u8], dir: &Path) -> Vec<(String, PathBuf)> {
         }
     }
     out
+}
+
+/// The first line (1-based) of an MTL library whose colour statement (`Ka`, `Kd`, `Ks`, `Ke`)
+/// has fewer than three values: tobj 4.0 panics on those (an `unwrap` on a 3-array) instead of
+/// reporting them, so they are refused before it reads the library (found by AFL++ on the `obj`
+/// target).
+fn short_colour(mtl: &[u8]) -> Option<usize> {
+    String::from_utf8_lossy(mtl)
+        .lines()
+        .enumerate()
+        .find(|(_, line)| {
+            let mut words = line.split_whitespace();
+            matches!(words.next(), Some("Ka" | "Kd" | "Ks" | "Ke")) && words.count() < 3
+        })
+        .map(|(i, _)| i + 1)
+}
+
+/// The first face corner whose position, texture coordinate or normal index is 0 or reaches
+/// past the elements defined before it (negative indices count back from the last one), as a
+/// message naming the line. tobj 4.0 turns such an index into an arithmetic overflow (a panic
+/// with overflow checks, a wrong read without) instead of an error (found by AFL++ on the `obj`
+/// target), so faces are checked before it reads them.
+fn bad_face_index(obj: &[u8]) -> Option<String> {
+    let mut counts = [0u64; 3]; // v, vt, vn
+    for (n, line) in String::from_utf8_lossy(obj).lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f") => {
+                for corner in words {
+                    for (kind, part) in corner.split('/').take(3).enumerate() {
+                        if part.is_empty() {
+                            continue;
+                        }
+                        let ok = part
+                            .parse::<i64>()
+                            .is_ok_and(|i| i != 0 && i.unsigned_abs() <= counts[kind]);
+                        if !ok {
+                            let what = ["position", "texture coordinate", "normal"][kind];
+                            return Some(format!(
+                                "line {}: face {what} index `{part}` is not one of the {} defined before it",
+                                n + 1,
+                                counts[kind]
+                            ));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
 }
