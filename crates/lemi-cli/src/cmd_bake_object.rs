@@ -22,6 +22,7 @@ use lemi_bake::object_bake::{bake_object, object_bake_params, write_object_bundl
 use lemi_core::bundle::SceneRef;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::TextureFormat;
+use lemi_core::enclosure::Enclosure;
 use lemi_core::object_cell::{object_bounds, ObjectError, ObjectSetup, ObjectViewCell, Portal};
 use lemi_core::{Aabb, Scene};
 use lemi_gpu::{BackendChoice, Gpu};
@@ -165,12 +166,17 @@ struct Job {
 }
 
 /// The openings `--portal` names, each with the default of `--portal-max-distance` (the far
-/// side of its room, for the built-in ones), and the default of `--keep` for them.
-type PortalList = (Vec<(Portal, Option<f64>)>, Option<Aabb>);
+/// side of its room, for the built-in ones), the default of `--keep` for them, and, for `all`,
+/// the building they are every opening of.
+type PortalList = (Vec<(Portal, Option<f64>)>, Option<Aabb>, Option<Enclosure>);
 
 fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
     if spec.trim() != "all" {
-        return Ok((vec![(Portal::parse(spec).context("--portal")?, None)], None));
+        return Ok((
+            vec![(Portal::parse(spec).context("--portal")?, None)],
+            None,
+            None,
+        ));
     }
     let layout = match sources {
         [one] => lemi_scene::builtin::BuiltinSpec::parse(one)
@@ -185,7 +191,7 @@ fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
             sources.join(" ")
         );
     };
-    let portals = layout
+    let portals: Vec<(Portal, Option<f64>)> = layout
         .portals
         .iter()
         .map(|p| {
@@ -213,18 +219,18 @@ fn portals_of(spec: &str, sources: &[String]) -> Result<PortalList> {
             (portal, far)
         })
         .collect();
-    // the building, a millimetre larger than its box so that rounding keeps its walls
-    let keep = Aabb::new(
-        DVec3::from_array(layout.building_min.map(f64::from)) - DVec3::splat(1e-3),
-        DVec3::from_array(layout.building_max.map(f64::from)) + DVec3::splat(1e-3),
-    );
-    Ok((portals, Some(keep)))
+    // every opening of the building is baked: a renderer may cull the outside to them
+    let enclosure = layout.enclosure();
+    enclosure
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--portal all: the building's layout: {e}"))?;
+    Ok((portals, Some(enclosure.bounds), Some(enclosure)))
 }
 
 /// The jobs of `--portal`: one per opening, each replacing what lies wholly in its frustum beyond
 /// `--near` (default `4 s − d`, see `Args::near`).
 fn portal_jobs(args: &Args, spec: &str, scene: &Scene, alpha: f64) -> Result<Vec<Job>> {
-    let (portals, default_keep) = portals_of(spec, &args.scene.scenes)?;
+    let (portals, default_keep, enclosure) = portals_of(spec, &args.scene.scenes)?;
     let keep = args.keep.or(default_keep).unwrap_or(Aabb::EMPTY);
     if let Some(n) = args.near {
         if !(n.is_finite() && n >= 0.0) {
@@ -267,9 +273,10 @@ fn portal_jobs(args: &Args, spec: &str, scene: &Scene, alpha: f64) -> Result<Vec
             );
         }
         let bounds = object_bounds(scene, &object);
-        let setup =
+        let mut setup =
             ObjectSetup::through_portal(portal, angle, d, max, bounds, args.resolution, alpha)
                 .map_err(bad)?;
+        setup.enclosure = enclosure.clone();
         let out = if many {
             args.out.join(format!("portal-{k}"))
         } else {

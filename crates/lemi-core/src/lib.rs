@@ -13,6 +13,7 @@ pub mod clip_border;
 pub mod compress;
 pub mod container;
 pub mod culling;
+pub mod enclosure;
 pub mod face;
 pub mod frustum;
 pub mod hlod;

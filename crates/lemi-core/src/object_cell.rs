@@ -31,6 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::cell::ViewCell;
 use crate::classify::{Slabs, TriRef};
+use crate::enclosure::Enclosure;
 use crate::layering::{CellPlan, FacePlan};
 use crate::placement::{
     place_object_layers, schaufler_res, EnvParams, Layer, ObjectCell, ObjectParams,
@@ -620,6 +621,11 @@ pub struct ObjectSetup {
     /// through; the frustum is then set by the opening and the shaft, not by the object's box.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub portal: Option<Portal>,
+    /// For a portal impostor of a building whose every opening was baked together
+    /// (`lemi bake-object --portal all`): the whole building, so that a renderer may restrict
+    /// the outside to the openings' part of the view ([`Enclosure`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub enclosure: Option<Enclosure>,
 }
 
 /// Depth of the frustum's near plane in front of the object's near side, relative, so that no
@@ -814,6 +820,7 @@ impl ObjectSetup {
             frame,
             params,
             portal,
+            enclosure: None,
         })
     }
 

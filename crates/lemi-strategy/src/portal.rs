@@ -13,6 +13,16 @@
 //! drawn as geometry unless an impostor valid at the viewpoint represents it, and an impostor is
 //! never drawn outside its view cell.
 //!
+//! **Only through the openings.** When the bake knew the whole building (`lemi bake-object
+//! --portal all` records it as an [`Enclosure`] in every bundle), each class is split once more
+//! into the triangles wholly inside the building and the rest. From an eye in one of its rooms
+//! the rest, and every impostor (all lie outside), can be seen only through the openings, so they
+//! are culled to the sub-frustum of [`Enclosure::window`] (the openings' part of the view, found
+//! through the doorways between rooms) and drawn with it as scissor: the image does not change
+//! (the test compares frames with and without), the triangles and quads drawn do. Without an
+//! enclosure (openings given one by one, which may not be all of them) the outside is culled to
+//! the whole view.
+//!
 //! Why this shows every surface within the impostors' bound: a portal's object is everything
 //! wholly inside its frustum beyond its near distance ([`Portal::select`]), and that frustum holds
 //! every point any viewpoint of its cell sees through the opening, so from inside the cell every
@@ -31,10 +41,11 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use lemi_core::bundle::Bundle;
 use lemi_core::classify::TriRef;
+use lemi_core::enclosure::Enclosure;
 use lemi_core::object_cell::{complement, ObjectSetup};
 use lemi_core::Scene;
 use lemi_gpu::{
-    CullOptions, CulledGeometry, Gpu, GpuChunk, GpuMaterials, ImpostorCell, ImpostorRenderer,
+    Composite, CullOptions, CulledGeometry, Gpu, GpuMaterials, ImpostorCell, ImpostorRenderer,
 };
 
 use crate::{FrameRequest, Strategy, StrategyError, StrategyFrame, StrategyKind, StrategyReport};
@@ -50,6 +61,8 @@ struct PortalPart {
 struct Class {
     /// Bit `k`: portal `k`'s object holds these triangles.
     mask: u64,
+    /// Not wholly inside the enclosure's bounds: seen from its rooms only through its openings.
+    outside: bool,
     geometry: CulledGeometry,
 }
 
@@ -57,6 +70,9 @@ struct Class {
 pub struct PortalStrategy {
     portals: Vec<PortalPart>,
     classes: Vec<Class>,
+    /// The building all portals are the openings of, when their bake knew it (every bundle
+    /// records the same one): from its rooms the outside is drawn only through its openings.
+    enclosure: Option<Enclosure>,
     materials: Arc<GpuMaterials>,
     renderer: ImpostorRenderer,
     total_triangles: u64,
@@ -122,20 +138,35 @@ impl PortalStrategy {
             texture_bytes += cell.texture_bytes();
             portals.push(PortalPart { setup, cell });
         }
-        let mut by_mask: HashMap<u64, Vec<TriRef>> = HashMap::new();
+        let enclosure = portals
+            .first()
+            .and_then(|p| p.setup.enclosure.clone())
+            .filter(|e| {
+                e.validate().is_ok()
+                    && portals
+                        .iter()
+                        .all(|p| p.setup.enclosure.as_ref() == Some(e))
+            });
+        let mut by_mask: HashMap<(u64, bool), Vec<TriRef>> = HashMap::new();
         for (m, tris) in signature.iter().enumerate() {
             for (t, &mask) in tris.iter().enumerate() {
-                by_mask.entry(mask).or_default().push(TriRef {
+                let outside = enclosure.as_ref().is_some_and(|e| {
+                    scene.meshes[m]
+                        .triangle(t)
+                        .iter()
+                        .any(|v| !e.bounds.contains(v.as_dvec3()))
+                });
+                by_mask.entry((mask, outside)).or_default().push(TriRef {
                     mesh: m as u32,
                     tri: t as u32,
                 });
             }
         }
-        let mut masks: Vec<u64> = by_mask.keys().copied().collect();
-        masks.sort_unstable();
-        let mut classes = Vec::with_capacity(masks.len());
-        for mask in masks {
-            let tris = &by_mask[&mask];
+        let mut keys: Vec<(u64, bool)> = by_mask.keys().copied().collect();
+        keys.sort_unstable();
+        let mut classes = Vec::with_capacity(keys.len());
+        for (mask, outside) in keys {
+            let tris = &by_mask[&(mask, outside)];
             let meshes = scene
                 .extract(tris)
                 .map_err(|e| StrategyError::Invalid(e.to_string()))?;
@@ -145,12 +176,14 @@ impl PortalStrategy {
             };
             classes.push(Class {
                 mask,
+                outside,
                 geometry: CulledGeometry::upload(gpu, &part, &CullOptions::default())?,
             });
         }
         Ok(PortalStrategy {
             portals,
             classes,
+            enclosure,
             materials,
             renderer: ImpostorRenderer::new(gpu)?,
             total_triangles: scene.triangle_count(),
@@ -166,6 +199,19 @@ impl PortalStrategy {
             .enumerate()
             .filter(|(_, p)| p.setup.cell.contains(eye))
             .fold(0, |m, (k, _)| m | 1 << k)
+    }
+
+    /// Whether the portals know their building ([`Enclosure`]), so that from its rooms the
+    /// outside is drawn only through its openings.
+    pub fn has_enclosure(&self) -> bool {
+        self.enclosure.is_some()
+    }
+
+    /// The same strategy drawing the outside over the whole view from the rooms too (for
+    /// comparisons: the image is the same, the work is not).
+    pub fn without_enclosure(mut self) -> PortalStrategy {
+        self.enclosure = None;
+        self
     }
 
     /// How many signature classes the scene was split into.
@@ -193,29 +239,47 @@ impl Strategy for PortalStrategy {
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         let active = self.active(r.eye);
         let view_proj = r.view.view_proj();
-        let mut geometry: Vec<(&GpuChunk, std::ops::Range<u32>)> = Vec::new();
+        // from a room of the building, the outside shows only through its openings: `Some(None)`
+        // when none is in view
+        let window = self
+            .enclosure
+            .as_ref()
+            .filter(|e| e.encloses(r.eye))
+            .map(|e| e.window(r.view));
+        let mut parts = Composite::default();
         let mut near_triangles = 0;
         for class in self.classes.iter().filter(|c| c.mask & active == 0) {
-            let list = class.geometry.cull(&view_proj);
+            let (list, windowed) = match (class.outside, &window) {
+                (true, Some(None)) => continue,
+                (true, Some(Some(w))) => (class.geometry.cull(&w.view_proj), true),
+                _ => (class.geometry.cull(&view_proj), false),
+            };
             near_triangles += list.triangles;
             let chunks = class.geometry.chunks();
-            geometry.extend(
-                list.draws
-                    .iter()
-                    .filter_map(|d| chunks.get(d.chunk).map(|c| (c, d.indices.clone()))),
-            );
+            let ranges = list
+                .draws
+                .iter()
+                .filter_map(|d| chunks.get(d.chunk).map(|c| (c, d.indices.clone())));
+            if windowed {
+                parts.windowed.extend(ranges);
+            } else {
+                parts.geometry.extend(ranges);
+            }
         }
-        let cells: Vec<&ImpostorCell> = self
-            .portals
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| active & (1 << k) != 0)
-            .map(|(_, p)| &p.cell)
-            .collect();
-        let quads = cells.iter().map(|c| c.quad_count() as u64).sum();
+        parts.window = window.flatten();
+        if !matches!(window, Some(None)) {
+            parts.cells = self
+                .portals
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| active & (1 << k) != 0)
+                .map(|(_, p)| &p.cell)
+                .collect();
+        }
+        let quads = parts.cells.iter().map(|c| c.quad_count() as u64).sum();
         let frame = self
             .renderer
-            .render_composite(&geometry, &self.materials, &cells, r.view, r.options, true)?
+            .render_composite(&parts, &self.materials, r.view, r.options, true)?
             .ok_or_else(|| {
                 StrategyError::Invalid("the composite frame was not read back".into())
             })?;

@@ -21,6 +21,7 @@ use glam::DVec3;
 use lemi_bake::object_bake::{bake_object, object_bake_params, write_object_bundle};
 use lemi_core::bundle::{Bundle, LayerTarget, SceneRef};
 use lemi_core::camera::{Camera, View};
+use lemi_core::enclosure::Enclosure;
 use lemi_core::object_cell::{object_bounds, ObjectSetup, Portal};
 use lemi_core::{Aabb, Scene};
 use lemi_gpu::{Frame, Gpu, GpuMaterials, GpuScene, RenderOptions, Renderer, UploadOptions};
@@ -32,15 +33,23 @@ const H: u32 = 120;
 const FOV_Y: f64 = 45.0;
 const BUILDING: ([f64; 3], [f64; 3]) = ([11.999, -0.001, -7.301], [28.601, 9.401, 7.301]);
 
-fn bake(gpu: &Gpu, scene: &Scene, portal: &Portal, max: f64, dir: &Path) -> Bundle {
+fn bake(
+    gpu: &Gpu,
+    scene: &Scene,
+    portal: &Portal,
+    max: f64,
+    enclosure: &Enclosure,
+    dir: &Path,
+) -> Bundle {
     let alpha = (FOV_Y / H as f64).to_radians();
     let keep = Aabb::new(DVec3::from(BUILDING.0), DVec3::from(BUILDING.1));
     let frame = portal.frame(60.0, 1.5).expect("frame");
     let object = portal.select(&frame, scene, &keep, 2.0 * max * 30f64.to_radians().tan());
     assert!(!object.is_empty());
     let bounds = object_bounds(scene, &object);
-    let setup = ObjectSetup::through_portal(portal, 60.0, 1.5, Some(max), bounds, None, alpha)
+    let mut setup = ObjectSetup::through_portal(portal, 60.0, 1.5, Some(max), bounds, None, alpha)
         .expect("setup");
+    setup.enclosure = Some(enclosure.clone());
     let placement = setup.place().expect("placement");
     let params = object_bake_params(
         &setup,
@@ -99,15 +108,49 @@ fn portal_frames_show_the_geometry_and_only_inside_their_cells() {
     let dir = tempfile::tempdir().expect("tempdir");
     let window = Portal::parse("16.2,1.75,-7.3,0,0,-1,1.2,1.4").expect("window");
     let door = Portal::parse("12,1.25,-3.6,-1,0,0,1,2.2").expect("door");
+    // the whole building, all eight openings: from its rooms the outside is drawn only through
+    // their part of the view
+    let spec = lemi_scene::builtin::BuiltinSpec::parse("builtin:interior:20k:1").expect("spec");
+    let enclosure = lemi_scene::builtin::interior_layout(&spec)
+        .expect("layout")
+        .enclosure();
+    assert_eq!(
+        enclosure
+            .rooms
+            .iter()
+            .map(|r| r.openings.len())
+            .sum::<usize>(),
+        8
+    );
+    assert_eq!(enclosure.doorways.len(), 3);
     let bundles = vec![
-        bake(&gpu, &scene, &window, 7.5, &dir.path().join("portal-0")),
-        bake(&gpu, &scene, &door, 8.5, &dir.path().join("portal-1")),
+        bake(
+            &gpu,
+            &scene,
+            &window,
+            7.5,
+            &enclosure,
+            &dir.path().join("portal-0"),
+        ),
+        bake(
+            &gpu,
+            &scene,
+            &door,
+            8.5,
+            &enclosure,
+            &dir.path().join("portal-1"),
+        ),
     ];
     let materials =
         Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
     let mut strategy =
         PortalStrategy::new(&gpu, &scene, materials.clone(), &bundles).expect("portals");
+    assert!(strategy.has_enclosure());
     assert!(strategy.class_count() >= 3, "{}", strategy.class_count());
+    let mut unwindowed = PortalStrategy::new(&gpu, &scene, materials.clone(), &bundles)
+        .expect("portals")
+        .without_enclosure();
+    assert!(!unwindowed.has_enclosure());
     let full = GpuScene::upload(&gpu, &scene, &UploadOptions::default()).expect("scene");
     let reference = Renderer::new(&gpu).expect("renderer");
     let options = RenderOptions::default();
@@ -127,6 +170,54 @@ fn portal_frames_show_the_geometry_and_only_inside_their_cells() {
         (f, r)
     };
     let total = scene.triangle_count();
+    // in the rooms, the window changes no pixel but draws fewer triangles: looking out of the
+    // window, along the room, at an inner wall (no opening in view: no quads either)
+    let mut fewer = 0;
+    for (eye, target, openings_in_view) in [
+        (
+            DVec3::new(16.2, 1.75, -3.0),
+            DVec3::new(16.2, 1.75, -40.0),
+            true,
+        ),
+        (
+            DVec3::new(14.0, 1.7, -5.0),
+            DVec3::new(19.0, 1.5, -1.0),
+            true,
+        ),
+        (
+            DVec3::new(16.0, 1.7, -3.0),
+            DVec3::new(16.0, 0.15, -3.5),
+            false,
+        ),
+    ] {
+        let v = view(eye, target);
+        let request = FrameRequest {
+            eye,
+            velocity: DVec3::ZERO,
+            dt: 0.1,
+            view: &v,
+            options: &options,
+            measure_error: false,
+        };
+        let a = strategy.frame(&request).expect("windowed frame");
+        let b = unwindowed.frame(&request).expect("frame");
+        let (coverage, _, _, same) = compare(&a.frame, &b.frame);
+        let n = (W * H) as usize;
+        println!(
+            "{eye}: {} triangles windowed, {} without; {same} of {n} pixels identical",
+            a.near_triangles, b.near_triangles
+        );
+        assert!(same * 1000 >= n * 999, "{eye}: {same} of {n} identical");
+        assert!(coverage * 1000 <= n, "{eye}: {coverage}");
+        assert!(a.near_triangles <= b.near_triangles, "{eye}");
+        if a.near_triangles < b.near_triangles {
+            fewer += 1;
+        }
+        if !openings_in_view {
+            assert_eq!(a.far_primitives, 0, "{eye}: quads with no opening in view");
+        }
+    }
+    assert_eq!(fewer, 3, "the window culled nothing");
     // inside the window's shaft, looking out through it
     for (eye, target) in [
         (DVec3::new(16.2, 1.75, -3.0), DVec3::new(16.2, 1.75, -40.0)),

@@ -6,6 +6,7 @@ use std::ops::Range;
 use std::sync::Mutex;
 
 use lemi_core::camera::View;
+use lemi_core::enclosure::Window;
 
 use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF};
 use super::upload::{macro_format, macro_layout};
@@ -22,6 +23,23 @@ use crate::{Gpu, GpuError};
 const RENDER_WGSL: &str = include_str!("../render.wgsl");
 /// The quad entry points, appended to the shading module.
 const IMPOSTOR_WGSL: &str = include_str!("impostor.wgsl");
+
+/// What one frame of [`ImpostorRenderer::render_composite`] draws.
+#[derive(Default)]
+pub struct Composite<'a> {
+    /// Index ranges of uploaded chunks (e.g. the kept ranges of [`crate::CulledGeometry`] culls)
+    /// drawn over the whole view.
+    pub geometry: Vec<(&'a GpuChunk, Range<u32>)>,
+    /// Index ranges drawn only inside `window` (all of the view without one).
+    pub windowed: Vec<(&'a GpuChunk, Range<u32>)>,
+    /// Cells whose quads are drawn, inside `window` (their own near geometry is not drawn:
+    /// upload them with an empty near list).
+    pub cells: Vec<&'a ImpostorCell>,
+    /// The part of the view `windowed` and the quads are restricted to (a scissor rectangle; its
+    /// frustum culls the quads' draws), e.g. the openings of an
+    /// [`lemi_core::enclosure::Enclosure`]. `None`: the whole view.
+    pub window: Option<Window>,
+}
 
 /// Draws [`ImpostorCell`]s: the reference pipeline for near geometry, the quad pipelines (opaque
 /// and alpha-tested), globals and cached render targets.
@@ -242,21 +260,23 @@ impl ImpostorRenderer {
         } else {
             Vec::new()
         };
-        self.render_composite(&geometry, &near.materials, &[cell], view, options, readback)
+        let parts = Composite {
+            geometry,
+            cells: vec![cell],
+            ..Composite::default()
+        };
+        self.render_composite(&parts, &near.materials, view, options, readback)
     }
 
-    /// Renders a frame of several parts (portal impostors, TR sec. 3): the index ranges
-    /// `geometry` of uploaded chunks (e.g. the kept ranges of [`crate::CulledGeometry`] culls),
-    /// shaded exactly like [`crate::Renderer`] with `materials`, then the quads of every one of
-    /// `cells` (their own near geometry is not drawn: upload them with an empty near list), all
-    /// depth-tested against each other in one frame. Reads the images back with `readback`
-    /// (otherwise waits for the GPU and returns `None`; [`ImpostorRenderer::last_gpu_ms`] times
-    /// the frame either way).
+    /// Renders a frame of several parts (portal impostors, TR sec. 3, see [`Composite`]): its
+    /// geometry, shaded exactly like [`crate::Renderer`] with `materials`, then the quads of its
+    /// cells, all depth-tested against each other in one frame. Reads the images back with
+    /// `readback` (otherwise waits for the GPU and returns `None`;
+    /// [`ImpostorRenderer::last_gpu_ms`] times the frame either way).
     pub fn render_composite(
         &self,
-        geometry: &[(&GpuChunk, Range<u32>)],
+        parts: &Composite<'_>,
         materials: &GpuMaterials,
-        cells: &[&ImpostorCell],
         view: &View,
         options: &RenderOptions,
         readback: bool,
@@ -270,7 +290,21 @@ impl ImpostorRenderer {
         }
         let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
         globals.params[1] = QUAD_ALPHA_CUTOFF;
-        for (chunk, range) in geometry {
+        let cells = &parts.cells;
+        let window = match parts.window {
+            Some(w) => {
+                let [x0, y0, x1, y1] = w.rect;
+                if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
+                    return Err(GpuError::Invalid(format!(
+                        "window {:?} is empty or outside the {width}x{height} view",
+                        w.rect
+                    )));
+                }
+                Some(w)
+            }
+            None => None,
+        };
+        for (chunk, range) in parts.geometry.iter().chain(&parts.windowed) {
             if materials.bind_group(chunk.material).is_none() {
                 return Err(GpuError::Invalid(format!(
                     "near geometry uses material {} but only {} materials were uploaded",
@@ -328,8 +362,14 @@ impl ImpostorRenderer {
                 "the colour target has no linear view for the quads".into(),
             ));
         }
-        let draw_near = !geometry.is_empty();
-        let view_proj = view.view_proj();
+        let draw_near = !parts.geometry.is_empty() || !parts.windowed.is_empty();
+        let view_proj = window.map_or_else(|| view.view_proj(), |w| w.view_proj);
+        let scissor = |pass: &mut wgpu::RenderPass<'_>| {
+            if let Some(w) = window {
+                let [x0, y0, x1, y1] = w.rect;
+                pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
+            }
+        };
         let quads: Vec<(&ImpostorCell, &(wgpu::Buffer, wgpu::Buffer))> = cells
             .iter()
             .filter(|c| !c.draws.is_empty())
@@ -362,7 +402,12 @@ impl ImpostorRenderer {
                 pass.set_pipeline(&self.near_pipeline);
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
-                for (chunk, range) in geometry {
+                let whole = parts.geometry.len();
+                for (i, (chunk, range)) in parts.geometry.iter().chain(&parts.windowed).enumerate()
+                {
+                    if i == whole {
+                        scissor(&mut pass);
+                    }
                     if range.is_empty() {
                         continue;
                     }
@@ -387,6 +432,7 @@ impl ImpostorRenderer {
                     true,
                 );
             }
+            scissor(&mut pass);
             let mut pipeline = None;
             for (cell, (vertices, indices)) in &quads {
                 pass.set_bind_group(0, &self.globals_group, &[]);

@@ -37,8 +37,9 @@
 //! upper storey), `interior-roof`, `interior-plaster` (walls, reveals, ceilings) and
 //! `interior-floor` (wooden boards).
 
-use glam::Vec3;
-use lemi_core::{Material, SceneBuilder};
+use glam::{DVec3, Vec3};
+use lemi_core::enclosure::{Doorway as EnclosedDoorway, Enclosure, Room as EnclosedRoom};
+use lemi_core::{Aabb, Material, SceneBuilder};
 
 #[cfg(doc)]
 use super::{AVENUE_FREE_HALF_WIDTH, PLAZA_FREE_RADIUS};
@@ -121,16 +122,80 @@ pub struct Portal {
     pub outward: [f32; 3],
 }
 
+/// A doorway between two rooms: a `width` × `height` rectangle centred on `center` in the plane of
+/// one face of its wall, whose unit normal is `across` (±X or ±Z).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Doorway {
+    /// Indices into [`InteriorLayout::rooms`].
+    pub rooms: [usize; 2],
+    pub center: [f32; 3],
+    pub width: f32,
+    pub height: f32,
+    pub across: [f32; 3],
+}
+
 /// The building of `builtin:interior`: its rooms, its openings to the outside and its outer box.
 #[derive(Clone, Debug, PartialEq)]
 pub struct InteriorLayout {
     pub rooms: Vec<Room>,
     /// Every opening to the outside, ordered by room.
     pub portals: Vec<Portal>,
+    /// The doorways between rooms.
+    pub doorways: Vec<Doorway>,
     /// Corner of the building's bounding box (walls, floor, roof) with the smallest coordinates.
     pub building_min: [f32; 3],
     /// Corner of the building's bounding box with the largest coordinates.
     pub building_max: [f32; 3],
+}
+
+impl InteriorLayout {
+    /// The building as an [`Enclosure`]: its box a millimetre larger (so that rounding keeps its
+    /// walls inside), its rooms' walkable boxes and the rectangles of all its openings to the
+    /// outside. The walls, floors, ceilings and roof close it but for those openings (the module
+    /// docs), which is what an enclosure promises.
+    pub fn enclosure(&self) -> Enclosure {
+        let v = |a: [f32; 3]| DVec3::from_array(a.map(f64::from));
+        // the corners of a rectangle in a vertical plane of normal `normal`
+        let rect = |center: [f32; 3], normal: [f32; 3], width: f32, height: f32| {
+            let c = v(center);
+            let along = DVec3::Y.cross(v(normal)) * (0.5 * f64::from(width));
+            let up = DVec3::Y * (0.5 * f64::from(height));
+            [
+                c - along - up,
+                c + along - up,
+                c + along + up,
+                c - along + up,
+            ]
+        };
+        Enclosure {
+            bounds: Aabb::new(
+                v(self.building_min) - DVec3::splat(1e-3),
+                v(self.building_max) + DVec3::splat(1e-3),
+            ),
+            rooms: self
+                .rooms
+                .iter()
+                .enumerate()
+                .map(|(k, r)| EnclosedRoom {
+                    walkable: Aabb::new(v(r.min), v(r.max)),
+                    openings: self
+                        .portals
+                        .iter()
+                        .filter(|p| p.room == k)
+                        .map(|p| rect(p.center, p.outward, p.width, p.height))
+                        .collect(),
+                })
+                .collect(),
+            doorways: self
+                .doorways
+                .iter()
+                .map(|d| EnclosedDoorway {
+                    rooms: d.rooms,
+                    corners: rect(d.center, d.across, d.width, d.height),
+                })
+                .collect(),
+        }
+    }
 }
 
 /// The rooms and portals of a spec's building: `Some` for `builtin:interior` (whatever its budget
@@ -358,9 +423,35 @@ fn layout() -> InteriorLayout {
         }
     }
     portals.sort_by_key(|p| p.room);
+    // the rooms on either side of each interior hole: those whose inner rectangle holds a point
+    // half a wall beyond each face
+    let mut doorways = Vec::new();
+    for w in walls().iter().filter(|w| w.outside == 0) {
+        for h in &w.holes {
+            let a = mid(h.a0, h.a1);
+            let room_at = |c: f32| {
+                let p = w.at(a, FLOOR_Y + 1.0, c);
+                (0..ROOMS.len()).find(|&r| {
+                    let (x0, x1, z0, z1) = room_rect(r);
+                    (x0..=x1).contains(&p.x) && (z0..=z1).contains(&p.z)
+                })
+            };
+            let t = 0.5 * WALL_THICKNESS;
+            if let (Some(r0), Some(r1)) = (room_at(w.c0 - t), room_at(w.c1 + t)) {
+                doorways.push(Doorway {
+                    rooms: [r0, r1],
+                    center: w.at(a, mid(h.y0, h.y1), w.c0).to_array(),
+                    width: h.a1 - h.a0,
+                    height: h.y1 - h.y0,
+                    across: w.across().to_array(),
+                });
+            }
+        }
+    }
     InteriorLayout {
         rooms,
         portals,
+        doorways,
         building_min: [XS[0], 0.0, ZS[0]],
         building_max: [XS[5], EAVES_Y + ROOF_RISE, ZS[5]],
     }

@@ -31,7 +31,7 @@ use lemi_core::{Scene, SceneBuilder};
 use crate::SceneError;
 
 pub use city::{AVENUE_FREE_HALF_WIDTH, PLAZA_FREE_RADIUS};
-pub use interior::{interior_layout, InteriorLayout, Portal, PortalKind, Room};
+pub use interior::{interior_layout, Doorway, InteriorLayout, Portal, PortalKind, Room};
 
 /// Triangle budget when the spec gives none.
 pub const DEFAULT_TRIANGLES: u64 = 200_000;
