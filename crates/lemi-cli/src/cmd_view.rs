@@ -112,6 +112,11 @@ pub struct Args {
     /// The scene, if it moved since the bake (checked against the bundle's fingerprint).
     #[arg(long = "scene", value_name = "SCENE")]
     pub scene_override: Vec<String>,
+    /// An object impostor's bundle (`lemi bake-object`, repeatable) drawn with the bundle's cells,
+    /// as in `lemi walk --with-object`: in every cell its view cell holds whole, the object is
+    /// drawn as its impostor instead of its triangles; elsewhere as geometry.
+    #[arg(long, value_name = "OBJECT_BUNDLE")]
+    pub with_object: Vec<PathBuf>,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -166,6 +171,20 @@ pub fn run(args: Args) -> Result<()> {
     check_display()?;
     let (bundle, scene) = crate::bundle_view::open(&args.bundle, &args.scene_override, false)?;
     let manifest = bundle.manifest().clone();
+    // object impostors are checked before a window opens
+    let objects = if args.with_object.is_empty() {
+        Vec::new()
+    } else {
+        let kind = crate::strategy::kind_for(&manifest, None)?;
+        if manifest.object.is_some() || !kind.is_layered() {
+            bail!(
+                "--with-object: object impostors are drawn with the cells of a layered \
+                 environment-map bundle, and {} is not one",
+                args.bundle.display()
+            );
+        }
+        crate::cmd_render::object_cells(&bundle, &args.with_object)?
+    };
     let event_loop = EventLoop::new().map_err(|e| {
         anyhow::anyhow!(
             "cannot open the display (DISPLAY={}, WAYLAND_DISPLAY={}): {e}; is the X server or \
@@ -203,6 +222,7 @@ pub fn run(args: Args) -> Result<()> {
         args,
         backend,
         manifest,
+        objects: Arc::new(objects),
         scene_bounds: scene.bounds,
         scene: Some(scene),
         camera,
@@ -315,6 +335,8 @@ struct App {
     args: Args,
     backend: BackendChoice,
     manifest: Manifest,
+    /// Object impostors composed into the cells they serve (`--with-object`).
+    objects: Arc<Vec<lemi_core::bundle::CellFile>>,
     fov_x: f64,
     /// Moved into the viewer when the window exists.
     scene: Option<lemi_core::Scene>,
@@ -381,8 +403,9 @@ impl App {
                 .context("uploading the scene's materials")?,
         );
         let a = &self.args;
-        let options =
+        let mut options =
             crate::cmd_walk::streamer_options(a.cache_mb, a.upload_kb, a.max_speed, a.stall);
+        options.loader.objects = self.objects.clone();
         let mut streamer = Streamer::new(
             gpu.clone(),
             self.manifest.clone(),

@@ -167,3 +167,103 @@ fn view_runs_frames_under_xvfb_and_records_a_path_walk_replays() {
     );
     std::fs::remove_dir_all(&d).ok();
 }
+
+/// `lemi view --with-object`: an object impostor whose view cell holds the bundle's cells whole is
+/// composed into them (more quads, fewer near triangles in the first cell than without it), and
+/// bad object bundles are clean errors naming the flag.
+#[test]
+fn view_composes_an_object_impostor_into_the_cells_it_serves() {
+    if !which("xvfb-run") {
+        eprintln!("skipped: xvfb-run not found (Debian: apt-get install xvfb xauth)");
+        return;
+    }
+    let d = tmp("with-object");
+    let (cells, object) = (d.join("cells"), d.join("object"));
+    // one 10 m cell on the avenue with one layer (its near field far out, holding the
+    // buildings), and those buildings as an object impostor from a box holding the cell whole
+    // (the setting of `lemi walk --with-object`'s test)
+    for args in [
+        &[
+            "bake",
+            "builtin:city:20k:3",
+            "--region",
+            "40,1.7,-5,50,1.7,5",
+            "--cell-size",
+            "10",
+            "--resolution",
+            "64",
+            "--layers",
+            "1",
+            "--alpha-deg",
+            "0.5",
+            "-o",
+        ][..],
+        &[
+            "bake-object",
+            "builtin:city:20k:3",
+            "--object",
+            "100,0.5,-100,300,80,100",
+            "--view-cell",
+            "box:34,-4,-6,56,7,6",
+            "--alpha-deg",
+            "0.5",
+            "-o",
+        ][..],
+    ] {
+        let out = if args[0] == "bake" { &cells } else { &object };
+        let o = lemi().args(args).arg(out).output().expect("lemi runs");
+        let (so, se) = text(&o);
+        assert!(o.status.success(), "{}: {so}\n{se}", args[0]);
+    }
+    let view = |bundle: &Path, extra: &[&std::ffi::OsStr]| {
+        let o = Command::new("xvfb-run")
+            .args(["-a", "-s", "-screen 0 800x600x24"])
+            .arg(env!("CARGO_BIN_EXE_lemi"))
+            .arg("view")
+            .arg(bundle)
+            .args(["--frames", "3", "--size", "160x90"])
+            .args(extra)
+            .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+            .output()
+            .expect("xvfb-run runs");
+        let (so, se) = text(&o);
+        assert!(!se.contains("panicked"), "panic: {se}");
+        (o.status.success(), so, se)
+    };
+    // "cell      0_0_0: impostors ready (Q quads, T near triangles)"
+    let counts = |so: &str| -> (u64, u64) {
+        let line = so
+            .lines()
+            .find(|l| l.contains("0_0_0: impostors ready"))
+            .unwrap_or_else(|| panic!("no ready line: {so}"));
+        let n: Vec<u64> = line
+            .split(['(', ' ', ','])
+            .filter_map(|w| w.parse().ok())
+            .collect();
+        (n[0], n[1])
+    };
+    let (ok, so, se) = view(&cells, &[]);
+    assert!(ok, "{so}\n{se}");
+    let (quads, tris) = counts(&so);
+    let (ok, so, se) = view(&cells, &["--with-object".as_ref(), object.as_os_str()]);
+    assert!(ok, "{so}\n{se}");
+    let (quads_with, tris_with) = counts(&so);
+    assert!(
+        quads_with > quads,
+        "{quads_with} quads with, {quads} without"
+    );
+    assert!(
+        tris_with < tris,
+        "{tris_with} triangles with, {tris} without"
+    );
+    // an object bundle is not a bundle of cells to compose into; a missing one is named
+    for (bundle, extra) in [
+        (object.as_path(), object.as_os_str()),
+        (cells.as_path(), "/nonexistent-object-bundle".as_ref()),
+    ] {
+        let (ok, so, se) = view(bundle, &["--with-object".as_ref(), extra]);
+        assert!(!ok, "accepted: {so}");
+        assert!(se.contains("--with-object"), "{se}");
+    }
+    std::fs::remove_dir_all(&d).ok();
+}
