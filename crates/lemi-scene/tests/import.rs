@@ -604,6 +604,15 @@ fn obj_indices_past_their_elements_and_short_mtl_colours_are_reported() {
         .unwrap_or_default();
     assert!(msg.contains("bad.obj") && msg.contains("line 5"), "{msg}");
     assert!(msg.contains("texture coordinate index `-9`"), "{msg}");
+    // polylines (`l`) go through the same arithmetic in tobj
+    let obj = dir.path().join("line.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nvn 0 0 1\nf 1 2 1\nl 1/1/1 2/1/0\n").expect("write");
+    let msg = load_path(&obj, UpAxis::Y)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(msg.contains("line.obj") && msg.contains("line 5"), "{msg}");
+    assert!(msg.contains("line texture coordinate index `1`"), "{msg}");
 
     let obj = dir.path().join("short.obj");
     std::fs::write(

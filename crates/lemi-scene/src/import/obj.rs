@@ -250,11 +250,12 @@ fn short_colour(mtl: &[u8]) -> Option<usize> {
         .map(|(i, _)| i + 1)
 }
 
-/// The first face corner whose position, texture coordinate or normal index is 0 or reaches
-/// past the elements defined before it (negative indices count back from the last one), as a
-/// message naming the line. tobj 4.0 turns such an index into an arithmetic overflow (a panic
-/// with overflow checks, a wrong read without) instead of an error (found by AFL++ on the `obj`
-/// target), so faces are checked before it reads them.
+/// The first face or polyline corner whose position, texture coordinate or normal index is 0 or
+/// reaches past the elements defined before it (negative indices count back from the last one),
+/// as a message naming the line. tobj 4.0 turns such an index into an arithmetic overflow (a
+/// panic with overflow checks, a wrong read without) instead of an error (found by AFL++ on the
+/// `obj` target, first in `f`, then in `l` statements, which tobj reads the same way), so both
+/// are checked before it reads them.
 fn bad_face_index(obj: &[u8]) -> Option<String> {
     let mut counts = [0u64; 3]; // v, vt, vn
     for (n, line) in String::from_utf8_lossy(obj).lines().enumerate() {
@@ -263,7 +264,8 @@ fn bad_face_index(obj: &[u8]) -> Option<String> {
             Some("v") => counts[0] += 1,
             Some("vt") => counts[1] += 1,
             Some("vn") => counts[2] += 1,
-            Some("f") => {
+            Some(statement @ ("f" | "l")) => {
+                let element = if statement == "f" { "face" } else { "line" };
                 for corner in words {
                     for (kind, part) in corner.split('/').take(3).enumerate() {
                         if part.is_empty() {
@@ -275,7 +277,7 @@ fn bad_face_index(obj: &[u8]) -> Option<String> {
                         if !ok {
                             let what = ["position", "texture coordinate", "normal"][kind];
                             return Some(format!(
-                                "line {}: face {what} index `{part}` is not one of the {} defined before it",
+                                "line {}: {element} {what} index `{part}` is not one of the {} defined before it",
                                 n + 1,
                                 counts[kind]
                             ));
