@@ -42,6 +42,8 @@ fn baked(o: &std::process::Output) -> u64 {
     v["baked"].as_u64().unwrap()
 }
 
+/// The eight shards, all started at once on the six cells (two shards get no cell, as
+/// pods of an Indexed Job with more completions than cells), then the merge.
 #[test]
 fn concurrent_shards_then_merge_equal_a_single_run() {
     let d = tmp("concurrent", "shards");
@@ -56,7 +58,7 @@ fn concurrent_shards_then_merge_equal_a_single_run() {
     let cells = Bundle::open(&single).unwrap().manifest().cells.len();
     assert_eq!(cells, 6);
 
-    let n = 4;
+    let n = 8;
     let sharded = d.join("sharded");
     run_all_at_once(
         (0..n)
