@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{assert_clean_error_all, lemi, stderr, tmp};
+use common::{assert_clean_error_all, lemi, stderr, tmp, AVENUE_CELL, AVENUE_OBJECT};
 
 const SCENE: &str = "builtin:city:20k:3";
 /// City buildings between x = 100 and 300 m (walls and roofs, not the ground).
@@ -227,38 +227,13 @@ fn a_walk_draws_an_object_impostor_in_the_cells_its_view_cell_holds() {
     let cells = d.join("cells");
     let object = d.join("object");
     let (c, o) = (cells.to_str().unwrap(), object.to_str().unwrap());
-    // one 10 m cell on the avenue, one layer (a near field far out, holding the buildings)
-    let bake = lemi(&[
-        "bake",
-        SCENE,
-        "--region",
-        "40,1.7,-5,50,1.7,5",
-        "--cell-size",
-        "10",
-        "--resolution",
-        "64",
-        "--layers",
-        "1",
-        "--alpha-deg",
-        "0.5",
-        "-o",
-        c,
-    ]);
+    // one 10 m cell on the avenue, one layer (a near field far out, holding the buildings),
+    // and the buildings from a view cell holding that cell whole
+    let bake = lemi(&[&["bake"], AVENUE_CELL, &["-o", c]].concat());
     assert!(bake.status.success(), "{}", stderr(&bake));
-    // the buildings from a view cell holding that cell whole
-    json(&lemi(&[
-        "bake-object",
-        SCENE,
-        "-o",
-        o,
-        "--object",
-        OBJECT,
-        "--view-cell",
-        "box:34,-4,-6,56,7,6",
-        "--alpha-deg",
-        "0.5",
-        "--json",
-    ]));
+    json(&lemi(
+        &[&["bake-object"], AVENUE_OBJECT, &["-o", o, "--json"]].concat(),
+    ));
     let walk = |with: bool, out: &str| {
         let dir = d.join(out);
         let mut args = vec![

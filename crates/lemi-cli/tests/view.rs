@@ -2,6 +2,9 @@
 //! (`xvfb-run`, Debian packages `xvfb xauth`; skipped with a printed reason when absent), and its
 //! clean error without a display.
 
+#[allow(dead_code)] // this suite runs the binary its own way; it shares the bakes' arguments
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -182,38 +185,19 @@ fn view_composes_an_object_impostor_into_the_cells_it_serves() {
     // one 10 m cell on the avenue with one layer (its near field far out, holding the
     // buildings), and those buildings as an object impostor from a box holding the cell whole
     // (the setting of `lemi walk --with-object`'s test)
-    for args in [
-        &[
-            "bake",
-            "builtin:city:20k:3",
-            "--region",
-            "40,1.7,-5,50,1.7,5",
-            "--cell-size",
-            "10",
-            "--resolution",
-            "64",
-            "--layers",
-            "1",
-            "--alpha-deg",
-            "0.5",
-            "-o",
-        ][..],
-        &[
-            "bake-object",
-            "builtin:city:20k:3",
-            "--object",
-            "100,0.5,-100,300,80,100",
-            "--view-cell",
-            "box:34,-4,-6,56,7,6",
-            "--alpha-deg",
-            "0.5",
-            "-o",
-        ][..],
+    for (command, args, out) in [
+        ("bake", common::AVENUE_CELL, &cells),
+        ("bake-object", common::AVENUE_OBJECT, &object),
     ] {
-        let out = if args[0] == "bake" { &cells } else { &object };
-        let o = lemi().args(args).arg(out).output().expect("lemi runs");
+        let o = lemi()
+            .arg(command)
+            .args(args)
+            .arg("-o")
+            .arg(out)
+            .output()
+            .expect("lemi runs");
         let (so, se) = text(&o);
-        assert!(o.status.success(), "{}: {so}\n{se}", args[0]);
+        assert!(o.status.success(), "{command}: {so}\n{se}");
     }
     let view = |bundle: &Path, extra: &[&std::ffi::OsStr]| {
         let o = Command::new("xvfb-run")

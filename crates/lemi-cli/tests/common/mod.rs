@@ -125,3 +125,33 @@ pub const SIX_CELLS: &[&str] = &[
     "--alpha-deg",
     "0.5",
 ];
+
+/// One 10 m cell on the avenue of a small built-in city with one layer (its near field far out,
+/// holding the buildings), for composing object impostors into it (`--with-object`).
+#[allow(dead_code)]
+pub const AVENUE_CELL: &[&str] = &[
+    "builtin:city:20k:3",
+    "--region",
+    "40,1.7,-5,50,1.7,5",
+    "--cell-size",
+    "10",
+    "--resolution",
+    "64",
+    "--layers",
+    "1",
+    "--alpha-deg",
+    "0.5",
+];
+
+/// The buildings 100 m and more down the avenue of [`AVENUE_CELL`]'s city as an object impostor,
+/// from a box view cell holding that cell whole.
+#[allow(dead_code)]
+pub const AVENUE_OBJECT: &[&str] = &[
+    "builtin:city:20k:3",
+    "--object",
+    "100,0.5,-100,300,80,100",
+    "--view-cell",
+    "box:34,-4,-6,56,7,6",
+    "--alpha-deg",
+    "0.5",
+];
