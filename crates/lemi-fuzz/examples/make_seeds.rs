@@ -11,6 +11,7 @@ use std::path::Path;
 
 use import_common::*;
 use lemi_core::bundle::CELL_MAGIC;
+use lemi_core::compress::{encode_blocks, write_ktx2, BlockFormat, Supercompression};
 use lemi_core::container::{self, Blob};
 
 fn put(target: &str, name: &str, bytes: &[u8]) {
@@ -106,6 +107,28 @@ f 1 3 4\nl 1 2\n",
         "empty.lemicell",
         &enc(&serde_json::json!({}), &[]),
     );
+
+    // KTX2: BC1 and BC7 macro-textures as block-format cells store them (Zstandard, and without
+    // supercompression), one with a second level; an 8×8 gradient with a transparent corner.
+    let rgba: Vec<u8> = (0..64u32)
+        .flat_map(|i| {
+            let (x, y) = ((i % 8) as u8, (i / 8) as u8);
+            [x * 30, y * 30, 90, if x < 2 && y < 2 { 0 } else { 255 }]
+        })
+        .collect();
+    for format in [BlockFormat::Bc1, BlockFormat::Bc7] {
+        let (blocks, _) = encode_blocks(format, 8, 8, &rgba).expect("encode");
+        let (small, _) = encode_blocks(format, 4, 4, &rgba[..64]).expect("encode");
+        let name = format!("{format:?}").to_lowercase();
+        for (tag, levels, scheme) in [
+            ("zstd", vec![blocks.clone()], Supercompression::Zstd),
+            ("raw", vec![blocks.clone()], Supercompression::None),
+            ("mips", vec![blocks.clone(), small], Supercompression::Zstd),
+        ] {
+            let file = write_ktx2(format, 8, 8, &levels, scheme).expect("ktx2");
+            put("ktx2", &format!("{name}_{tag}.ktx2"), &file);
+        }
+    }
 
     // Camera paths: the format's example, and one with a full turn and unknown fields.
     put(

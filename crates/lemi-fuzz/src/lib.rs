@@ -36,6 +36,7 @@ pub const TARGETS: &[Target] = &[
     ("container", fuzz_container),
     ("cell", fuzz_cell),
     ("manifest", fuzz_manifest),
+    ("ktx2", fuzz_ktx2),
     #[cfg(feature = "camera-path")]
     ("camera_path", fuzz_camera_path),
 ];
@@ -132,6 +133,18 @@ pub fn fuzz_manifest(data: &[u8]) {
             let _ = bundle.cell(id);
         }
     });
+}
+
+/// A KTX 2.0 macro-texture as a block-compressed cell stores it, read with
+/// [`lemi_core::compress::read_ktx2`] (header, level index, data format descriptor, Zstandard
+/// inflation); a file that reads has its first level decoded to RGBA, as the runtime does where
+/// the adapter lacks the block format.
+pub fn fuzz_ktx2(data: &[u8]) {
+    if let Ok(t) = lemi_core::compress::read_ktx2(data) {
+        if let Some(level) = t.levels.first() {
+            let _ = lemi_core::compress::decode_blocks(t.format, t.width, t.height, level);
+        }
+    }
 }
 
 /// A camera path (`lemi-path` JSON) read with [`lemi_walk::CameraPath::read`]; a path that reads is sampled
