@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::{anyhow, bail, Context, Result};
 use lemi_compare::{BakeRow, CompareOptions};
 use lemi_core::cell::CellId;
+use lemi_core::compress::TextureFormat;
 use lemi_core::Aabb;
 use lemi_eval::{EvalOptions, ViewpointSet};
 use lemi_gpu::{BackendChoice, Gpu};
@@ -94,6 +95,11 @@ pub struct Args {
     /// Evaluation image size (default: the bake's output view).
     #[arg(long, value_parser = crate::cmd_render::parse_size)]
     pub eval_size: Option<(u32, u32)>,
+    /// Also bake the `lemi` strategy with these texture formats (comma-separated: bc7, bc1;
+    /// png is the `lemi` row itself) and report each one's disk bytes, texture memory, encode
+    /// seconds and image cost against the reference and the PNG bake.
+    #[arg(long, value_delimiter = ',', value_parser = crate::cmd_bake::parse_texture_format)]
+    pub texture_formats: Vec<TextureFormat>,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -140,13 +146,14 @@ pub fn run(args: Args) -> Result<()> {
             ..Default::default()
         },
         command: std::env::args().collect::<Vec<_>>().join(" "),
+        texture_formats: args.texture_formats.clone(),
     };
     let say = |m: &str| {
         if !args.json {
             eprintln!("[{:>6.1} s] {m}", t0.elapsed().as_secs_f64());
         }
     };
-    let bake_one = |k: StrategyKind, dir: &Path| bake(&args, k, dir, &gpu);
+    let bake_one = |k: StrategyKind, f: TextureFormat, dir: &Path| bake(&args, k, f, dir, &gpu);
     let done = lemi_compare::run(&gpu, &options, bake_one, say)?;
     if let Some(e) = &done.plot_error {
         eprintln!("warning: no plot ({e})");
@@ -167,14 +174,27 @@ pub fn run(args: Args) -> Result<()> {
             failed = true;
         }
     }
+    for f in &done.formats {
+        for e in &f.errors {
+            eprintln!("error: lemi with {} textures: {e}", f.format);
+            failed = true;
+        }
+    }
     if failed {
         std::process::exit(1);
     }
     Ok(())
 }
 
-/// Bakes the layered strategy `k` into `dir`: the job `lemi bake` builds from the same flags.
-fn bake(args: &Args, k: StrategyKind, dir: &Path, gpu: &Gpu) -> Result<BakeRow> {
+/// Bakes the layered strategy `k` with `format` textures into `dir`: the job `lemi bake` builds
+/// from the same flags.
+fn bake(
+    args: &Args,
+    k: StrategyKind,
+    format: TextureFormat,
+    dir: &Path,
+    gpu: &Gpu,
+) -> Result<BakeRow> {
     let prepared = crate::cmd_bake::prepare(&crate::cmd_bake::Args {
         scenes: args.scenes.clone(),
         up: args.up,
@@ -201,7 +221,7 @@ fn bake(args: &Args, k: StrategyKind, dir: &Path, gpu: &Gpu) -> Result<BakeRow> 
         shard: None,
         backend: args.backend.clone(),
         json: true,
-        texture_format: Default::default(),
+        texture_format: format,
     })?;
     let row = lemi_compare::bake(gpu, &prepared.scene, &prepared.job, k)?;
     Ok(BakeRow {

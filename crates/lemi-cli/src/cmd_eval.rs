@@ -66,6 +66,15 @@ pub struct Args {
     /// pixels where the reference shows background.
     #[arg(long, value_name = "SHARE")]
     pub require_false_coverage: Option<f64>,
+    /// Another bake of the same scene and cells (e.g. the PNG bake of a BC1 bundle): its frames
+    /// of the same views are compared with this bundle's (FLIP, PSNR, pixels of changed
+    /// coverage), the image cost of a texture format.
+    #[arg(long, value_name = "BUNDLE")]
+    pub against: Option<PathBuf>,
+    /// With --against: fail (exit status 2) when the mean FLIP against the other bake exceeds
+    /// this.
+    #[arg(long, value_name = "FLIP", requires = "against")]
+    pub require_against_flip: Option<f64>,
     /// Far-field strategy to judge: the one the bundle was baked for (default), or warp or
     /// dynamic (built at run time from a `lemi` bundle's cells and near lists).
     #[arg(long)]
@@ -91,9 +100,14 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
-    if let Some(x) = args.require_false_coverage {
-        if !(0.0..=1.0).contains(&x) {
-            bail!("--require-false-coverage must be a share in [0, 1] (got {x})");
+    for (flag, v) in [
+        ("--require-false-coverage", args.require_false_coverage),
+        ("--require-against-flip", args.require_against_flip),
+    ] {
+        if let Some(x) = v {
+            if !(0.0..=1.0).contains(&x) {
+                bail!("{flag} must be in [0, 1] (got {x})");
+            }
         }
     }
     if let Some(f) = args.fov {
@@ -131,6 +145,16 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
+    let against = match &args.against {
+        None => None,
+        Some(_) if !kind.is_layered() => {
+            bail!("--against compares two layered bakes; strategy {kind} is drawn at run time")
+        }
+        Some(path) => Some(
+            lemi_core::bundle::Bundle::open(path)
+                .with_context(|| format!("--against {}", path.display()))?,
+        ),
+    };
     let gpu = Arc::new(Gpu::new(backend)?);
     let bar = if args.json {
         ProgressBar::hidden()
@@ -148,8 +172,20 @@ pub fn run(args: Args) -> Result<()> {
         bar.set_message(what.to_string());
     };
     let t = std::time::Instant::now();
-    let run =
-        lemi_eval::evaluate_strategy(&gpu, &bundle, Arc::new(scene), kind, &options, progress)?;
+    let run = match &against {
+        Some(other) => lemi_eval::evaluate_bundle_against(
+            &gpu,
+            &bundle,
+            &scene,
+            Some(other),
+            &options,
+            progress,
+        )
+        .with_context(|| format!("--against {}", other.dir().display()))?,
+        None => {
+            lemi_eval::evaluate_strategy(&gpu, &bundle, Arc::new(scene), kind, &options, progress)?
+        }
+    };
     bar.finish_and_clear();
     let seconds = t.elapsed().as_secs_f64();
     let dir = args
@@ -186,6 +222,8 @@ pub fn run(args: Args) -> Result<()> {
         v["size"] = serde_json::json!([w, h]);
         v["fov_x_deg"] = serde_json::json!(fov);
         v["report"] = serde_json::json!(index);
+        v["textures"] = serde_json::to_value(&run.textures)?;
+        v["against"] = serde_json::to_value(&run.against)?;
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         let (w, h, fov) = lemi_eval::output_view(&manifest, &options);
@@ -223,6 +261,12 @@ pub fn run(args: Args) -> Result<()> {
             s.false_coverage_pixels,
             100.0 * s.false_coverage
         );
+        if let Some(t) = &run.textures {
+            println!("textures   {}", t.describe());
+        }
+        if let Some(a) = &run.against {
+            println!("against    {}", a.describe());
+        }
         println!("report     {}", index.display());
         println!("verdict    {verdict}");
     }
@@ -270,6 +314,15 @@ pub fn run(args: Args) -> Result<()> {
             failed.push(format!(
                 "false coverage {:.5} exceeds --require-false-coverage {x}",
                 s.false_coverage
+            ));
+        }
+    }
+    if let (Some(x), Some(a)) = (args.require_against_flip, &run.against) {
+        if a.mean_flip as f64 > x {
+            failed.push(format!(
+                "mean FLIP {:.4} against {} exceeds --require-against-flip {x}",
+                a.mean_flip,
+                a.bundle.display()
             ));
         }
     }

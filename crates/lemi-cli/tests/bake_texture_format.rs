@@ -112,3 +112,91 @@ fn unknown_and_unavailable_formats_are_clear_errors() {
         &["--texture-format bc7", "hlod"],
     );
 }
+
+#[test]
+fn eval_against_the_png_bake_reports_the_formats_image_cost() {
+    let d = tmp("cli-texture-format", "against");
+    let (png, bc1, foreign) = (d.join("png"), d.join("bc1"), d.join("foreign"));
+    let (png, bc1, foreign) = (
+        png.to_str().unwrap(),
+        bc1.to_str().unwrap(),
+        foreign.to_str().unwrap(),
+    );
+    for (out, format) in [(png, "png"), (bc1, "bc1")] {
+        let o = bake(out, &["--texture-format", format]);
+        assert!(o.status.success(), "{format}: {}", stderr(&o));
+    }
+    let eval = |bundle: &str, extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            bundle,
+            "--corners-only",
+            "--viewpoints",
+            "0",
+            "--size",
+            "96x54",
+        ];
+        args.extend(extra);
+        lemi(&args)
+    };
+    let o = eval(bc1, &["--against", png, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (t, a) = (&v["textures"], &v["against"]);
+    assert_eq!(t["format"], "bc1", "{t}");
+    assert!(
+        t["texture_memory_bytes_per_cell"].as_f64().unwrap() > 0.0,
+        "{t}"
+    );
+    assert_eq!(a["format"], "png", "{a}");
+    assert_eq!(a["views"], v["views"], "{a}");
+    assert_eq!(
+        a["coverage_mismatch_pixels"], 0,
+        "BC1 keeps the alpha test exact: {a}"
+    );
+    let flip = a["mean_flip"].as_f64().unwrap();
+    assert!(flip > 0.0 && flip < 0.02, "{a}");
+    // the text output says it, and the gate fails on a bound the format does not keep
+    let o = eval(bc1, &["--against", png]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("against    ") && text.contains("textures   bc1"),
+        "{text}"
+    );
+    let o = eval(bc1, &["--against", png, "--require-against-flip", "0"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--require-against-flip"),
+        "{}",
+        stderr(&o)
+    );
+    // another scene's bake, a missing bundle and a gate without --against are clear errors
+    let o = lemi(&[
+        "bake",
+        "builtin:city:20k:4",
+        "--region",
+        "15,1.7,-5,25,1.7,5",
+        "--cell-size",
+        "10",
+        "--resolution",
+        "64",
+        "--layers",
+        "4",
+        "--alpha-deg",
+        "0.5",
+        "-o",
+        foreign,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_clean_error_all(
+        &eval(bc1, &["--against", foreign]),
+        &["--against", "another scene"],
+    );
+    let missing = d.join("missing");
+    let missing = missing.to_str().unwrap();
+    assert_clean_error_all(&eval(bc1, &["--against", missing]), &["--against", missing]);
+    assert_clean_error_all(
+        &eval(bc1, &["--require-against-flip", "0.01"]),
+        &["--against"],
+    );
+}

@@ -1,6 +1,7 @@
 //! `lemi compare` end to end on a small city: every strategy is baked (or built at run time),
 //! walked along one path and evaluated at the same viewpoints; the tables name every strategy and
-//! every strategy's image is recognisable. Unknown strategy names are clear errors everywhere.
+//! every strategy's image is recognisable; `--texture-formats` adds the `lemi` bake's rows per
+//! texture format. Unknown strategy names are clear errors everywhere.
 
 mod common;
 
@@ -84,13 +85,41 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
         "--corners-only",
         "--eval-size",
         "96x54",
+        "--texture-formats",
+        "bc1",
         "-o",
         out.to_str().unwrap(),
         "--json",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // `lemi` also baked with BC1 textures, evaluated against the reference and the PNG bake
+    let formats = v["texture_formats"].as_array().unwrap();
+    assert_eq!(formats.len(), 1, "{v}");
+    let bc1 = &formats[0];
+    assert_eq!(bc1["format"], "bc1", "{bc1}");
+    assert!(bc1["errors"].as_array().unwrap().is_empty(), "{bc1}");
+    assert_eq!(bc1["eval"]["textures"]["format"], "bc1", "{bc1}");
+    assert_eq!(bc1["against_png"]["format"], "png", "{bc1}");
+    assert_eq!(bc1["against_png"]["coverage_mismatch_pixels"], 0, "{bc1}");
+    assert_eq!(bc1["eval"]["crack_pixels"], 0, "{bc1}");
+    assert!(
+        bc1["bake"]["per_cell"][0]["stage_seconds"]["bc1"].is_number(),
+        "{bc1}"
+    );
     let rows = v["strategies"].as_array().unwrap();
+    let (png_memory, bc1_memory) = (
+        rows[0]["eval"]["textures"]["texture_memory_bytes_per_cell"]
+            .as_f64()
+            .unwrap(),
+        bc1["eval"]["textures"]["texture_memory_bytes_per_cell"]
+            .as_f64()
+            .unwrap(),
+    );
+    assert!(
+        bc1_memory < png_memory / 2.0,
+        "{png_memory} against {bc1_memory}"
+    );
     let names: Vec<&str> = rows
         .iter()
         .map(|r| r["strategy"].as_str().unwrap())
@@ -124,6 +153,8 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
         );
     }
     assert!(md.contains("lemi compare"), "the command is recorded");
+    assert!(md.contains("## Texture formats of the `lemi` bake"), "{md}");
+    assert!(md.contains("| png |") && md.contains("| bc1 |"), "{md}");
     // speed-ups against geometry-culled, the unculled one beside; comparison.json carries both
     assert!(
         md.contains("speed-up vs culled | speed-up vs unculled"),

@@ -4,7 +4,9 @@ use std::fmt::Write as _;
 
 use lemi_strategy::StrategyKind;
 
-use crate::{GeometryTimes, Row};
+use crate::{encode_seconds_per_cell, BakeRow, EvalRow, FormatRow, GeometryTimes, Row};
+use lemi_core::compress::TextureFormat;
+use lemi_eval::AgainstResult;
 
 fn fmt_ms(x: Option<f64>) -> String {
     x.map_or("–".into(), |v| format!("{v:.1}"))
@@ -22,7 +24,12 @@ fn fmt_bytes(x: Option<f64>) -> String {
 /// The tables of `COMPARISON.md`: one row per strategy, the columns explained below the table,
 /// the notes (coverage, PSNR, SSIM, errors) and the frame-time plot; `command` is the command
 /// that made the comparison (recorded at the top).
-pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: &str) -> String {
+pub fn render_markdown(
+    rows: &[Row],
+    formats: &[FormatRow],
+    geometry: Option<&GeometryTimes>,
+    command: &str,
+) -> String {
     let mut m = String::new();
     let _ = writeln!(m, "# Far-field strategies compared\n");
     let _ = writeln!(m, "Made by:\n\n```\n{command}\n```\n");
@@ -134,6 +141,9 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
          farther than one slab behind); *mean FLIP*: mean over the views of the per-view mean \
          FLIP."
     );
+    if !formats.is_empty() {
+        texture_formats(&mut m, rows, formats);
+    }
     let mut notes = String::new();
     for r in rows {
         if let Some(e) = &r.eval {
@@ -151,9 +161,94 @@ pub fn render_markdown(rows: &[Row], geometry: Option<&GeometryTimes>, command: 
             let _ = writeln!(notes, "- {} failed: {}", r.strategy, err.replace('\n', " "));
         }
     }
+    for f in formats {
+        for err in &f.errors {
+            let _ = writeln!(
+                notes,
+                "- lemi with {} textures failed: {}",
+                f.format,
+                err.replace('\n', " ")
+            );
+        }
+    }
     if !notes.is_empty() {
         let _ = writeln!(m, "\n{notes}");
     }
     let _ = writeln!(m, "\n![frame time per frame](frame_times.svg)");
     m
+}
+
+/// The table of the `lemi` bake per texture format: the PNG bake (the `lemi` strategy's row)
+/// first, then every further format against it.
+fn texture_formats(m: &mut String, rows: &[Row], formats: &[FormatRow]) {
+    let _ = writeln!(m, "\n## Texture formats of the `lemi` bake\n");
+    let _ = writeln!(
+        m,
+        "| format | cell file/cell | textures on disk/cell | texture memory/cell | encode s/cell | mean FLIP | PSNR dB | crack px | FLIP vs PNG | PSNR vs PNG | changed coverage px |"
+    );
+    let _ = writeln!(m, "|---|---|---|---|---|---|---|---|---|---|---|");
+    let png = rows.iter().find(|r| r.strategy == StrategyKind::Lemi);
+    let png_memory = png
+        .and_then(|r| r.eval.as_ref())
+        .and_then(|e| e.textures.as_ref())
+        .map(|t| t.texture_memory_bytes_per_cell);
+    let mut line = |format: TextureFormat,
+                    bake: Option<&BakeRow>,
+                    eval: Option<&EvalRow>,
+                    against: Option<&AgainstResult>| {
+        let dash = || "–".to_string();
+        let t = eval.and_then(|e| e.textures.as_ref());
+        let memory = t.map_or_else(dash, |t| {
+            let share = png_memory.filter(|p| *p > 0.0).map_or(String::new(), |p| {
+                format!(" ({:.0} %)", 100.0 * t.texture_memory_bytes_per_cell / p)
+            });
+            format!(
+                "{}{share}",
+                fmt_bytes(Some(t.texture_memory_bytes_per_cell))
+            )
+        });
+        let encode = bake
+            .and_then(|b| encode_seconds_per_cell(b, format))
+            .map_or_else(dash, |(e, whole)| {
+                format!(
+                    "{e:.2} ({:.0} % of {whole:.1})",
+                    100.0 * e / whole.max(1e-9)
+                )
+            });
+        let psnr = |p: Option<f64>| p.map_or("∞".into(), |x| format!("{x:.2}"));
+        let _ = writeln!(
+            m,
+            "| {} | {} | {} | {memory} | {encode} | {} | {} | {} | {} | {} | {} |",
+            format.name(),
+            fmt_bytes(t.map(|t| t.disk_bytes_per_cell)),
+            fmt_bytes(t.map(|t| t.texture_bytes_per_cell)),
+            eval.map_or_else(dash, |e| format!("{:.4}", e.mean_flip)),
+            eval.map_or_else(dash, |e| psnr(e.psnr)),
+            eval.map_or_else(dash, |e| e.crack_pixels.to_string()),
+            against.map_or_else(dash, |a| format!("{:.4}", a.mean_flip)),
+            against.map_or_else(dash, |a| psnr(a.psnr)),
+            against.map_or_else(dash, |a| a.coverage_mismatch_pixels.to_string()),
+        );
+    };
+    if let Some(r) = png {
+        line(TextureFormat::Png, r.bake.as_ref(), r.eval.as_ref(), None);
+    }
+    for f in formats {
+        line(
+            f.format,
+            f.bake.as_ref(),
+            f.eval.as_ref(),
+            f.against_png.as_ref(),
+        );
+    }
+    let _ = writeln!(
+        m,
+        "\nColumns: per evaluated cell, the cell file and its macro-textures as stored (PNG, or \
+         KTX2 with Zstandard), the texture memory they take in their stored format (RGBA8 for \
+         PNG, the blocks for BC7 and BC1; share of the PNG bake's), the seconds of the bake's \
+         encode stage (share of the cell's whole bake); *mean FLIP*, *PSNR*, *crack px* against \
+         all geometry as above; *vs PNG*: the same views against the PNG bake's frames; \
+         *changed coverage px*: pixels covered in one of the two frames only (0 when the format \
+         keeps the alpha test exact)."
+    );
 }

@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use lemi_core::bundle::Manifest;
-use lemi_eval::{EvalOptions, EvalRun};
+use lemi_core::compress::TextureFormat;
+use lemi_eval::{AgainstResult, EvalOptions, EvalRun, TextureFootprint};
 use lemi_strategy::StrategyKind;
 use lemi_walk::{FrameRecord, WalkSummary};
 use serde::Serialize;
@@ -59,6 +60,8 @@ pub struct EvalRow {
     pub fov_x_deg: f64,
     pub seconds: f64,
     pub report: PathBuf,
+    /// What the evaluated cells take on disk and in texture memory (layered strategies).
+    pub textures: Option<TextureFootprint>,
 }
 
 impl EvalRow {
@@ -101,8 +104,43 @@ impl EvalRow {
             fov_x_deg: fov,
             seconds,
             report: report.to_path_buf(),
+            textures: run.textures.clone(),
         }
     }
+}
+
+/// The `lemi` bake in one more texture format (`lemi compare --texture-formats`): what it takes
+/// and what it costs in image, against the reference and against the PNG bake of the same
+/// cells (the `lemi` strategy's row).
+#[derive(Clone, Debug, Serialize)]
+pub struct FormatRow {
+    pub format: TextureFormat,
+    pub bundle: PathBuf,
+    pub bake: Option<BakeRow>,
+    pub eval: Option<EvalRow>,
+    /// The same views against the PNG bake's.
+    pub against_png: Option<AgainstResult>,
+    pub errors: Vec<String>,
+}
+
+/// Seconds per baked cell spent encoding the macro-textures (the bake stage named by the
+/// format), and the whole bake's seconds per cell.
+pub fn encode_seconds_per_cell(bake: &BakeRow, format: TextureFormat) -> Option<(f64, f64)> {
+    let baked: Vec<_> = bake
+        .per_cell
+        .iter()
+        .filter(|c| c.status == "baked")
+        .collect();
+    if baked.is_empty() {
+        return None;
+    }
+    let n = baked.len() as f64;
+    let encode: f64 = baked
+        .iter()
+        .filter_map(|c| c.stage_seconds.get(format.name()))
+        .sum();
+    let whole: f64 = baked.iter().map(|c| c.seconds).sum();
+    Some((encode / n, whole / n))
 }
 
 /// One strategy's row of numbers.
@@ -141,4 +179,6 @@ pub struct Comparison<'a> {
     pub seconds: f64,
     pub strategies: &'a [Row],
     pub geometry: Option<GeometryTimes>,
+    /// `lemi` baked in further texture formats (`--texture-formats`).
+    pub texture_formats: &'a [FormatRow],
 }

@@ -15,7 +15,8 @@ use lemi_strategy::{StrategyContext, StrategyError, StrategyKind};
 use lemi_walk::{auto_path, CameraPath, FrameRecord, PathError, WalkError, WalkOptions, WalkRun};
 
 use crate::{error_chain, render_markdown, BakeRow, CompareError, Comparison, EvalRow};
-use crate::{GeometryTimes, Row};
+use crate::{FormatRow, GeometryTimes, Row};
+use lemi_core::compress::TextureFormat;
 
 /// What to compare and how.
 #[derive(Clone, Debug)]
@@ -37,6 +38,10 @@ pub struct CompareOptions {
     pub eval: EvalOptions,
     /// The command that made the comparison (recorded in `COMPARISON.md` and `comparison.json`).
     pub command: String,
+    /// Texture formats the `lemi` strategy is also baked in (`OUT/lemi-FORMAT`) and evaluated,
+    /// each against the reference and against the PNG bake, the `lemi` strategy's own (PNG is
+    /// that row and not baked twice). Empty: none.
+    pub texture_formats: Vec<TextureFormat>,
 }
 
 /// A finished comparison (its files are written).
@@ -44,6 +49,8 @@ pub struct CompareOptions {
 pub struct ComparisonRun {
     pub rows: Vec<Row>,
     pub geometry: Option<GeometryTimes>,
+    /// The `lemi` bake in the further texture formats.
+    pub formats: Vec<FormatRow>,
     /// `COMPARISON.md`.
     pub markdown: String,
     /// `comparison.json`.
@@ -111,13 +118,14 @@ enum StepError {
     Eval(#[from] EvalError),
 }
 
-/// Runs the comparison: `bake(kind, dir)` bakes the layered strategy `kind` into `dir` (the
-/// `lemi` bundle is baked too when `warp` or `dynamic` is compared); `progress` is told what
-/// starts. Writes the files into `options.out`.
+/// Runs the comparison: `bake(kind, format, dir)` bakes the layered strategy `kind` with
+/// macro-textures in `format` into `dir` (the `lemi` bundle is baked too when `warp` or
+/// `dynamic` is compared or texture formats are); `progress` is told what starts. Writes the
+/// files into `options.out`.
 pub fn run<E: std::fmt::Display>(
     gpu: &Arc<Gpu>,
     options: &CompareOptions,
-    mut bake: impl FnMut(StrategyKind, &Path) -> Result<BakeRow, E>,
+    mut bake: impl FnMut(StrategyKind, TextureFormat, &Path) -> Result<BakeRow, E>,
     mut progress: impl FnMut(&str),
 ) -> Result<ComparisonRun, CompareError> {
     check_strategies(&options.strategies)?;
@@ -132,15 +140,41 @@ pub fn run<E: std::fmt::Display>(
 
     // 1. bakes
     let mut bake_list: Vec<StrategyKind> = kinds.iter().copied().filter(|k| k.is_baked()).collect();
-    if kinds.iter().any(|k| !k.is_baked()) && !bake_list.contains(&StrategyKind::Lemi) {
+    let formats: Vec<TextureFormat> = (options.texture_formats.iter().copied())
+        .filter(|f| !f.is_png())
+        .collect();
+    if (kinds.iter().any(|k| !k.is_baked()) || !formats.is_empty())
+        && !bake_list.contains(&StrategyKind::Lemi)
+    {
         bake_list.insert(0, StrategyKind::Lemi);
     }
     let mut bakes: Vec<(StrategyKind, Result<BakeRow, String>)> = Vec::new();
     for &k in &bake_list {
         let dir = out.join(k.name());
         progress(&format!("baking {k} into {}", dir.display()));
-        let row = bake(k, &dir).map_err(|e| format!("bake ({k}): {e:#}"));
+        let row = bake(k, TextureFormat::Png, &dir).map_err(|e| format!("bake ({k}): {e:#}"));
         bakes.push((k, row));
+    }
+    let mut format_rows = Vec::new();
+    for &f in &formats {
+        let dir = out.join(format!("lemi-{}", f.name()));
+        progress(&format!(
+            "baking lemi with {f} textures into {}",
+            dir.display()
+        ));
+        let mut row = FormatRow {
+            format: f,
+            bundle: dir.clone(),
+            bake: None,
+            eval: None,
+            against_png: None,
+            errors: Vec::new(),
+        };
+        match bake(StrategyKind::Lemi, f, &dir) {
+            Ok(b) => row.bake = Some(b),
+            Err(e) => row.errors.push(format!("bake (lemi, {f}): {e:#}")),
+        }
+        format_rows.push(row);
     }
 
     // 2. walks and 3. evaluations
@@ -210,8 +244,17 @@ pub fn run<E: std::fmt::Display>(
         rows.push(row);
     }
 
+    let png_dir = out.join(StrategyKind::Lemi.name());
+    for row in format_rows.iter_mut().filter(|r| r.bake.is_some()) {
+        progress(&format!("evaluating lemi with {} textures", row.format));
+        if let Err(e) = eval_format(options, gpu, row, &png_dir) {
+            row.errors
+                .push(format!("eval (lemi, {}): {}", row.format, error_chain(&e)));
+        }
+    }
+
     let command = &options.command;
-    let markdown = render_markdown(&rows, geometry_times.as_ref(), command);
+    let markdown = render_markdown(&rows, &format_rows, geometry_times.as_ref(), command);
     write(&out.join("COMPARISON.md"), markdown.as_bytes())?;
     let mut walks: Vec<(&str, &[FrameRecord])> = (rows.iter())
         .map(|r| (r.strategy.name(), r.frames.as_slice()))
@@ -226,12 +269,14 @@ pub fn run<E: std::fmt::Display>(
         seconds: t0.elapsed().as_secs_f64(),
         strategies: &rows,
         geometry: geometry_times.clone(),
+        texture_formats: &format_rows,
     };
     let json = serde_json::to_string_pretty(&all)?;
     write(&out.join("comparison.json"), json.as_bytes())?;
     Ok(ComparisonRun {
         rows,
         geometry: geometry_times,
+        formats: format_rows,
         markdown,
         json,
         plot_error,
@@ -296,6 +341,42 @@ fn walk(
     run.summary.out = Some(dir.clone());
     run.write_files(&dir)?;
     Ok(run)
+}
+
+/// Evaluates the `lemi` bake of `row`'s texture format at the comparison's viewpoints, against
+/// the reference and against the PNG bake in `png_dir`; the report goes to `OUT/eval-lemi-F`.
+fn eval_format(
+    options: &CompareOptions,
+    gpu: &Arc<Gpu>,
+    row: &mut FormatRow,
+    png_dir: &Path,
+) -> Result<(), StepError> {
+    let opened = lemi_scene::open_bundle(&row.bundle, &[], None)
+        .map_err(|e| StepError::Open(StrategyKind::Lemi, e))?;
+    let png = Bundle::open(png_dir)
+        .map_err(|e| StepError::Eval(EvalError::Job(format!("{}: {e}", png_dir.display()))))?;
+    let t = Instant::now();
+    let run = lemi_eval::evaluate_bundle_against(
+        gpu,
+        &opened.bundle,
+        &opened.scene,
+        Some(&png),
+        &options.eval,
+        |_, _, _| {},
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let dir = (options.out).join(format!("eval-lemi-{}", row.format.name()));
+    let report = lemi_eval::write_report(&dir, &run.result, &run.worst)?;
+    row.against_png = run.against.clone();
+    row.eval = Some(EvalRow::new(
+        &run,
+        StrategyKind::Lemi,
+        opened.bundle.manifest(),
+        &options.eval,
+        seconds,
+        &report,
+    ));
+    Ok(())
 }
 
 /// Evaluates strategy `k` at the comparison's viewpoints; the report goes to `OUT/eval-k`.

@@ -41,7 +41,7 @@ fn the_tables_name_every_strategy_and_every_failure() {
         culled_mean_triangles: Some(1234.0),
         ..Default::default()
     };
-    let md = render_markdown(&rows, Some(&geometry), "lemi compare builtin:city");
+    let md = render_markdown(&rows, &[], Some(&geometry), "lemi compare builtin:city");
     assert!(md.starts_with("# Far-field strategies compared\n"), "{md}");
     assert!(md.contains("```\nlemi compare builtin:city\n```"), "{md}");
     assert!(md.contains("| lemi | – | – |"), "{md}");

@@ -35,8 +35,8 @@ pub use report::{
     ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
 pub use run::{
-    camera, evaluate_bundle, evaluate_with, output_view, CellRenderer, EvalOptions, EvalRun,
-    RenderedView, ViewpointSet,
+    camera, evaluate_bundle, evaluate_bundle_against, evaluate_with, output_view, AgainstResult,
+    CellRenderer, EvalOptions, EvalRun, RenderedView, TextureFootprint, ViewpointSet,
 };
 pub use stats::{Histogram, PixelErrorStats};
 pub use strategy_cells::{evaluate_strategy, StrategyCells};

@@ -13,6 +13,7 @@ use lemi_core::bundle::{Bundle, CellFile, Manifest};
 use lemi_core::camera::{Camera, View};
 use lemi_core::cell::{eval_directions, eval_viewpoints, CellId, ViewCell};
 use lemi_core::classify::TriRef;
+use lemi_core::compress::TextureFormat;
 use lemi_core::object_cell::{canonical_scene, complement};
 use lemi_core::parallax_error::{pixel_errors, LayerDepths};
 use lemi_core::Scene;
@@ -72,6 +73,150 @@ pub struct EvalRun {
     pub placement: PixelErrorStats,
     /// The error of pixels showing gap-filled texels (GI 2002 sec. 5.1).
     pub gap_filled: PixelErrorStats,
+    /// What the evaluated cells take on disk and in texture memory (layered bundles).
+    pub textures: Option<TextureFootprint>,
+    /// The same views compared with another bake's ([`evaluate_bundle_against`]).
+    pub against: Option<AgainstResult>,
+}
+
+/// What the evaluated cells of a layered bundle take, per cell: the cell file on disk, its
+/// macro-textures as stored (PNG or KTX2), and the texture memory they occupy in their stored
+/// format (RGBA8 for PNG, the blocks for BC7 and BC1).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TextureFootprint {
+    pub format: TextureFormat,
+    pub cells: u64,
+    pub disk_bytes_per_cell: f64,
+    pub texture_bytes_per_cell: f64,
+    pub texture_memory_bytes_per_cell: f64,
+}
+
+impl TextureFootprint {
+    fn add(&mut self, disk: u64, stats: &lemi_core::bundle::CellStats) {
+        let n = self.cells as f64;
+        let mean = |old: f64, x: u64| (old * n + x as f64) / (n + 1.0);
+        self.disk_bytes_per_cell = mean(self.disk_bytes_per_cell, disk);
+        self.texture_bytes_per_cell = mean(self.texture_bytes_per_cell, stats.texture_bytes());
+        self.texture_memory_bytes_per_cell = mean(
+            self.texture_memory_bytes_per_cell,
+            stats.texture_memory_bytes(),
+        );
+        self.cells += 1;
+    }
+
+    /// One line: format, disk, stored textures and texture memory per cell.
+    pub fn describe(&self) -> String {
+        format!(
+            "{}: {:.0} KB per cell file, of it {:.0} KB of macro-textures, {:.0} KB of texture \
+             memory per cell ({} cells)",
+            self.format.name(),
+            self.disk_bytes_per_cell / 1e3,
+            self.texture_bytes_per_cell / 1e3,
+            self.texture_memory_bytes_per_cell / 1e3,
+            self.cells
+        )
+    }
+}
+
+/// The evaluated views of a bundle compared with the same views of another bake of the same
+/// scene and cells (e.g. a block-compressed bake against its PNG bake): what the other bake's
+/// frame would have shown instead. A texture format that keeps the alpha test exact changes no
+/// pixel's coverage.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct AgainstResult {
+    pub bundle: std::path::PathBuf,
+    pub format: TextureFormat,
+    pub views: u64,
+    /// Mean over the views of the mean FLIP of this bake's frame against the other's.
+    pub mean_flip: f32,
+    pub max_flip: f32,
+    /// PSNR over RGB pooled over the views (by mean squared error); `None`: identical frames.
+    pub psnr: Option<f64>,
+    /// Pixels whose colour differs at all.
+    pub differing_pixels: u64,
+    /// Pixels covered in one frame and not in the other.
+    pub coverage_mismatch_pixels: u64,
+    pub pixels: u64,
+}
+
+impl AgainstResult {
+    /// One line: the image cost against the other bake.
+    pub fn describe(&self) -> String {
+        format!(
+            "against {} ({}): mean FLIP {:.4} (max {:.4}), PSNR {}, {:.3} % of pixels differ, \
+             {} pixels of changed coverage over {} views",
+            self.bundle.display(),
+            self.format.name(),
+            self.mean_flip,
+            self.max_flip,
+            self.psnr
+                .map_or("infinite (identical)".to_string(), |p| format!("{p:.2} dB")),
+            100.0 * self.differing_pixels as f64 / self.pixels.max(1) as f64,
+            self.coverage_mismatch_pixels,
+            self.views
+        )
+    }
+}
+
+/// Accumulates [`AgainstResult`] view by view.
+struct AgainstAcc {
+    views: u64,
+    flip_sum: f64,
+    max_flip: f32,
+    mse_sum: f64,
+    differing: u64,
+    coverage: u64,
+    pixels: u64,
+}
+
+impl AgainstAcc {
+    fn new() -> Self {
+        AgainstAcc {
+            views: 0,
+            flip_sum: 0.0,
+            max_flip: 0.0,
+            mse_sum: 0.0,
+            differing: 0,
+            coverage: 0,
+            pixels: 0,
+        }
+    }
+
+    fn add(&mut self, other: &Frame, this: &Frame, ppd: f32) -> Result<(), EvalError> {
+        let flip = crate::flip(other, this, ppd)?;
+        self.flip_sum += flip.mean as f64;
+        self.max_flip = self.max_flip.max(flip.mean);
+        self.mse_sum += crate::mse_rgb(other, this)?;
+        for (i, (a, b)) in other
+            .rgba
+            .chunks_exact(4)
+            .zip(this.rgba.chunks_exact(4))
+            .enumerate()
+        {
+            self.differing += u64::from(a[..3] != b[..3]);
+            let covered = |f: &Frame| f.depth.get(i).is_some_and(|d| d.is_finite());
+            self.coverage += u64::from(covered(other) != covered(this));
+        }
+        self.pixels += other.depth.len() as u64;
+        self.views += 1;
+        Ok(())
+    }
+
+    fn finish(self, bundle: &Bundle) -> AgainstResult {
+        let n = self.views.max(1) as f64;
+        let psnr = crate::psnr_from_mse(self.mse_sum / n);
+        AgainstResult {
+            bundle: bundle.dir().to_path_buf(),
+            format: bundle.manifest().params.texture_format,
+            views: self.views,
+            mean_flip: (self.flip_sum / n) as f32,
+            max_flip: self.max_flip,
+            psnr: psnr.is_finite().then_some(psnr),
+            differing_pixels: self.differing,
+            coverage_mismatch_pixels: self.coverage,
+            pixels: self.pixels,
+        }
+    }
 }
 
 /// The geometric error split into own and gap-filled texels.
@@ -159,9 +304,11 @@ struct LayeredCells<'a> {
     scene: &'a Scene,
     materials: Arc<GpuMaterials>,
     renderer: ImpostorRenderer,
-    recorder: CellRecorder<'a>,
+    /// Re-records the layers' depths to measure the geometric error (`None`: frames only).
+    recorder: Option<CellRecorder<'a>>,
     render_options: RenderOptions,
-    current: Option<(ViewCell, CellFile, ImpostorCell, LayerDepths)>,
+    current: Option<(ViewCell, CellFile, ImpostorCell, Option<LayerDepths>)>,
+    footprint: TextureFootprint,
 }
 
 impl CellRenderer for LayeredCells<'_> {
@@ -175,19 +322,25 @@ impl CellRenderer for LayeredCells<'_> {
         let gpu_cell =
             ImpostorCell::upload_file(self.gpu, self.materials.clone(), self.scene, &file)
                 .map_err(gpu_err(format!("uploading cell {id}")))?;
-        let depths = match &self.bundle.manifest().object {
-            None => self.recorder.record_depths(cell),
-            Some(o) => {
+        let depths = match (&self.recorder, &self.bundle.manifest().object) {
+            (None, _) => None,
+            (Some(recorder), None) => Some(recorder.record_depths(cell)),
+            (Some(recorder), Some(o)) => {
                 let placement = o.place().map_err(|e| err(format!("cell {id}: {e}")))?;
-                self.recorder
-                    .record_depths_planned(&o.canonical_cell(), &o.plan(&placement))
-                    .map(|d| LayerDepths {
-                        frame: Some(o.frame),
-                        ..d
-                    })
+                Some(
+                    recorder
+                        .record_depths_planned(&o.canonical_cell(), &o.plan(&placement))
+                        .map(|d| LayerDepths {
+                            frame: Some(o.frame),
+                            ..d
+                        }),
+                )
             }
         }
+        .transpose()
         .map_err(|e| err(format!("cell {id}: {e}")))?;
+        let disk = self.bundle.entry(id).map_or(0, |e| e.bytes);
+        self.footprint.add(disk, &file.header.stats);
         self.current = Some((*cell, file, gpu_cell, depths));
         Ok(())
     }
@@ -200,6 +353,14 @@ impl CellRenderer for LayeredCells<'_> {
             .renderer
             .render(gpu_cell, view, &self.render_options)
             .map_err(|e| err(format!("impostor render: {e}")))?;
+        let Some(depths) = depths else {
+            let n = frame.depth.len();
+            return Ok(RenderedView {
+                frame,
+                error_px: vec![f32::NAN; n],
+                gap_filled: None,
+            });
+        };
         let geometric = pixel_errors(
             view,
             &frame.depth,
@@ -230,11 +391,54 @@ pub fn evaluate_bundle(
     options: &EvalOptions,
     progress: impl FnMut(usize, usize, &str),
 ) -> Result<EvalRun, EvalError> {
+    evaluate_bundle_against(gpu, bundle, scene, None, options, progress)
+}
+
+/// Checks that `other` is another bake of `bundle`'s scene with every cell `options` evaluates,
+/// so that the same views of both can be compared.
+fn check_against(bundle: &Bundle, other: &Bundle, ids: &[CellId]) -> Result<(), EvalError> {
+    let (a, b) = (bundle.manifest(), other.manifest());
+    let what = other.dir().display();
+    if a.scene.fingerprint != b.scene.fingerprint {
+        return Err(err(format!(
+            "{what} was baked from another scene (fingerprint {} against {}): only bakes of the \
+             same scene can be compared",
+            b.scene.fingerprint, a.scene.fingerprint
+        )));
+    }
+    if a.grid != b.grid || a.object != b.object {
+        return Err(err(format!(
+            "{what} has other view cells than {}: only bakes of the same cells can be compared",
+            bundle.dir().display()
+        )));
+    }
+    if let Some(id) = ids.iter().find(|id| other.entry(**id).is_none()) {
+        return Err(err(format!("{what} has no cell {id}")));
+    }
+    Ok(())
+}
+
+/// Evaluates the cells of a bundle like [`evaluate_bundle`] and, with `against`, renders the
+/// same views with that other bake of the same scene and cells and compares the frames
+/// ([`EvalRun::against`]): the image cost of, e.g., a block-compressed texture format against
+/// the lossless PNG bake.
+pub fn evaluate_bundle_against(
+    gpu: &Gpu,
+    bundle: &Bundle,
+    scene: &Scene,
+    against: Option<&Bundle>,
+    options: &EvalOptions,
+    progress: impl FnMut(usize, usize, &str),
+) -> Result<EvalRun, EvalError> {
     let materials = Arc::new(
         GpuMaterials::upload(gpu, &scene.materials, &scene.textures)
             .map_err(|e| err(format!("uploading materials: {e}")))?,
     );
     let manifest = bundle.manifest();
+    if let Some(other) = against {
+        let ids = options.cells.clone().unwrap_or_else(|| bundle.cell_ids());
+        check_against(bundle, other, &ids)?;
+    }
     // an object bundle's layers are re-recorded from the object's triangles (every one its cell
     // does not draw as geometry) in its canonical frame
     let object_scene = match &manifest.object {
@@ -261,25 +465,75 @@ pub fn evaluate_bundle(
             )
         }
     };
-    let mut cells = LayeredCells {
+    let recorder = CellRecorder::new(
+        gpu,
+        object_scene.as_ref().unwrap_or(scene),
+        manifest.params.clone(),
+    )
+    .map_err(|e| err(format!("preparing to re-record depths: {e}")))?;
+    let mut cells = LayeredCells::new(
         gpu,
         bundle,
         scene,
-        materials,
-        renderer: ImpostorRenderer::new(gpu).map_err(|e| err(format!("impostor renderer: {e}")))?,
-        recorder: CellRecorder::new(
-            gpu,
-            object_scene.as_ref().unwrap_or(scene),
-            manifest.params.clone(),
-        )
-        .map_err(|e| err(format!("preparing to re-record depths: {e}")))?,
-        render_options: RenderOptions {
-            clear: options.clear,
-            ..Default::default()
-        },
-        current: None,
+        materials.clone(),
+        Some(recorder),
+        options,
+    )?;
+    let mut other = match against {
+        Some(b) => Some(LayeredCells::new(gpu, b, scene, materials, None, options)?),
+        None => None,
     };
-    evaluate_with(gpu, bundle, scene, options, &mut cells, progress)
+    let (mut run, acc) = evaluate_views(
+        gpu,
+        bundle,
+        scene,
+        options,
+        &mut cells,
+        other.as_mut().map(|o| o as &mut dyn CellRenderer),
+        progress,
+    )?;
+    run.against = against.map(|b| acc.finish(b));
+    run.textures = Some(cells.footprint.clone());
+    if let Some(t) = &run.textures {
+        run.result.info.insert("textures".into(), t.describe());
+    }
+    if let Some(a) = &run.against {
+        run.result.info.insert("against".into(), a.describe());
+    }
+    Ok(run)
+}
+
+impl<'a> LayeredCells<'a> {
+    fn new(
+        gpu: &'a Gpu,
+        bundle: &'a Bundle,
+        scene: &'a Scene,
+        materials: Arc<GpuMaterials>,
+        recorder: Option<CellRecorder<'a>>,
+        options: &EvalOptions,
+    ) -> Result<Self, EvalError> {
+        Ok(LayeredCells {
+            gpu,
+            bundle,
+            scene,
+            materials,
+            renderer: ImpostorRenderer::new(gpu)
+                .map_err(|e| err(format!("impostor renderer: {e}")))?,
+            recorder,
+            render_options: RenderOptions {
+                clear: options.clear,
+                ..Default::default()
+            },
+            current: None,
+            footprint: TextureFootprint {
+                format: bundle.manifest().params.texture_format,
+                cells: 0,
+                disk_bytes_per_cell: 0.0,
+                texture_bytes_per_cell: 0.0,
+                texture_memory_bytes_per_cell: 0.0,
+            },
+        })
+    }
 }
 
 /// A labelled viewpoint and the labelled view directions judged from it.
@@ -337,8 +591,22 @@ pub fn evaluate_with(
     scene: &Scene,
     options: &EvalOptions,
     renderer: &mut dyn CellRenderer,
-    mut progress: impl FnMut(usize, usize, &str),
+    progress: impl FnMut(usize, usize, &str),
 ) -> Result<EvalRun, EvalError> {
+    evaluate_views(gpu, bundle, scene, options, renderer, None, progress).map(|(run, _)| run)
+}
+
+/// [`evaluate_with`], and with `against` the same views rendered by it and compared with
+/// `renderer`'s frames ([`EvalRun::against`]).
+fn evaluate_views(
+    gpu: &Gpu,
+    bundle: &Bundle,
+    scene: &Scene,
+    options: &EvalOptions,
+    renderer: &mut dyn CellRenderer,
+    mut against: Option<&mut dyn CellRenderer>,
+    mut progress: impl FnMut(usize, usize, &str),
+) -> Result<(EvalRun, AgainstAcc), EvalError> {
     let manifest = bundle.manifest();
     let ids: Vec<CellId> = match &options.cells {
         Some(c) => c.clone(),
@@ -372,6 +640,7 @@ pub fn evaluate_with(
     let mut worst = WorstSet::new(WORST_PER_BUNDLE);
     let mut points_per_cell = Vec::new();
     let mut breakdown = Vec::new();
+    let mut against_acc = AgainstAcc::new();
     for id in &ids {
         let cell = manifest
             .grid
@@ -385,6 +654,9 @@ pub fn evaluate_with(
         let id = cell.id().to_string();
         progress(done, total, &format!("cell {id}: preparing"));
         renderer.begin_cell(cell)?;
+        if let Some(a) = against.as_deref_mut() {
+            a.begin_cell(cell)?;
+        }
         let mut stats = PixelErrorStats::new();
         let mut own = PixelErrorStats::new();
         let mut gap = PixelErrorStats::new();
@@ -399,6 +671,10 @@ pub fn evaluate_with(
                     .render(&full, &view, &render_options)
                     .map_err(gpu_err("reference render"))?;
                 let rendered = renderer.render(&view, *eye)?;
+                if let Some(a) = against.as_deref_mut() {
+                    let other = a.render(&view, *eye)?;
+                    against_acc.add(&other.frame, &rendered.frame, ppd)?;
+                }
                 match &rendered.gap_filled {
                     Some(g) => {
                         for (e, &g) in rendered.error_px.iter().zip(g) {
@@ -461,10 +737,13 @@ pub fn evaluate_with(
         gap,
     };
     result = result.with_info("error split", total.describe());
-    Ok(EvalRun {
+    let run = EvalRun {
         result,
         worst: worst.into_worst_views(),
         placement: total.own,
         gap_filled: total.gap,
-    })
+        textures: None,
+        against: None,
+    };
+    Ok((run, against_acc))
 }
