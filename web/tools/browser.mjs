@@ -51,7 +51,10 @@ try {
   page.on('pageerror', (e) => logs.push(`pageerror: ${e.message}`));
   await page.goto(url, { timeout });
   await page.waitForFunction(() => window.lemi && (window.lemi.ready || window.lemi.error), null, { timeout, polling: 100 });
-  const state = await page.evaluate(() => ({ error: window.lemi.error, renderer: window.lemi.renderer, cell: window.lemi.shownCell }));
+  const state = await page.evaluate(() => ({
+    error: window.lemi.error, renderer: window.lemi.renderer, cell: window.lemi.shownCell,
+    texture_formats: window.lemi.textureFormats,
+  }));
   Object.assign(out, state);
   if (state.error) throw new Error(`the viewer failed: ${state.error}`);
   if (shot) {

@@ -26,6 +26,9 @@ import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 // the decoder of EXT_meshopt_compression, which `lemi export` compresses vertices and indices with
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
+// `lemi export --textures ktx2`: the bundle's BC7/BC1 blocks in KTX2 (Zstandard supercompressed),
+// uploaded as they are where WebGL has the format (no Basis transcoder is involved)
+import { KTX2Loader } from 'three/addons/loaders/KTX2Loader.js';
 import { predict, locate, cellId } from './predict.js';
 
 // the files' texture coordinates are texel edges ± 1/16 texel (lemi-core's QUAD_GROWTH_TEXELS)
@@ -47,6 +50,8 @@ if (params.get('transparent') === '1') {
 const status = {
   ready: false, error: null, frames: 0, frameTimes: [], currentCell: null, shownCell: null,
   loadedCells: [], fetchedBytes: 0, residentBytes: 0, stalls: 0,
+  // the formats the macro-textures were uploaded in: RGBA8 (PNG), BC1 or BC7 (KTX2 blocks)
+  textureFormats: [],
 };
 window.lemi = status;
 
@@ -171,9 +176,35 @@ const nearUniforms = { grey: { value: quadUniforms.tint.value } };
 
 /// Rebuilds one impostor primitive as lemi's runtime draws it: the quads' vertices as the file
 /// holds them (grown), texel coordinates, the quad's texel rectangle and its layer per vertex.
+// The WebGL extension each block format of a KTX2 texture needs (set in main()).
+let glExtensions = null;
+const BLOCK_EXTENSIONS = new Map([
+  [THREE.RGBA_S3TC_DXT1_Format, ['BC1', 'WEBGL_compressed_texture_s3tc']],
+  [THREE.RGB_S3TC_DXT1_Format, ['BC1', 'WEBGL_compressed_texture_s3tc']],
+  [THREE.RGBA_BPTC_Format, ['BC7', 'EXT_texture_compression_bptc']],
+]);
+
+// A block-compressed macro-texture this browser cannot sample is a clear error, not a black cell.
+function checkBlockFormat(map) {
+  const noteFormat = (name) => {
+    if (!status.textureFormats.includes(name)) status.textureFormats.push(name);
+  };
+  if (!map.isCompressedTexture) {
+    noteFormat('RGBA8');
+    return;
+  }
+  const need = BLOCK_EXTENSIONS.get(map.format);
+  if (!need) throw new Error(`a KTX2 macro-texture of an unexpected format (three.js format ${map.format})`);
+  if (glExtensions && !glExtensions.has(need[1])) {
+    throw new Error(`the cells' ${need[0]} textures need WebGL's ${need[1]}, which this browser lacks: export with --textures png (lemi serve --textures png)`);
+  }
+  noteFormat(need[0]);
+}
+
 function lemiQuads(mesh, info) {
   const g = mesh.geometry;
   const map = mesh.material.map;
+  checkBlockFormat(map);
   const w = map.image.width;
   const h = map.image.height;
   // TEXCOORD_0 is either f32 (t / side) or integers 16·t + 1 mapped by KHR_texture_transform,
@@ -221,7 +252,8 @@ function lemiQuads(mesh, info) {
   geometry.setAttribute('layer', new THREE.BufferAttribute(layer, 1));
   geometry.setIndex(new THREE.BufferAttribute(index, 1));
   geometry.computeBoundingSphere();
-  // the texels as stored (sRGB bytes), fetched without decoding
+  // the texels as stored (sRGB bytes), fetched without decoding (for KTX2 blocks: uploaded as
+  // the UNORM variant of their sRGB format, so the sampled values are the stored ones)
   map.colorSpace = THREE.NoColorSpace;
   map.generateMipmaps = false;
   map.needsUpdate = true;
@@ -427,6 +459,8 @@ async function main() {
   const scene = new THREE.Scene();
   const loader = new GLTFLoader();
   loader.setMeshoptDecoder(MeshoptDecoder);
+  glExtensions = renderer.extensions;
+  loader.setKTX2Loader(new KTX2Loader().detectSupport(renderer));
   const cells = new Map(); // id → {state, group, bytes, info, lastWanted}
   let inFlight = 0;
 

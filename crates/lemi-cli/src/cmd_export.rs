@@ -52,7 +52,7 @@ pub struct Args {
     pub json: bool,
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TexturesArg {
     Png,
     Ktx2,

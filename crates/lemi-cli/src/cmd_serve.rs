@@ -2,6 +2,7 @@
 //! first, near geometry included, into `-o DIR`, default `PATH-web`) or an export directory (one
 //! holding `cells.json`); the viewer is copied in and the directory served over HTTP on
 //! localhost. Everything the page loads comes from that directory: it works offline.
+//! `--textures ktx2` exports a block-compressed bundle's KTX2 textures as they are.
 
 use std::net::TcpListener;
 use std::path::PathBuf;
@@ -24,6 +25,11 @@ pub struct Args {
     /// Export without the near geometry (no scene is loaded).
     #[arg(long)]
     pub no_near: bool,
+    /// Texture format of the exported cells: png (decoded, any browser) or ktx2 (a bundle baked
+    /// with --texture-format bc7 or bc1: its blocks as stored, for browsers whose WebGL has
+    /// the format, e.g. desktop browsers with S3TC for BC1 and BPTC for BC7).
+    #[arg(long, value_enum, default_value = "png")]
+    pub textures: crate::cmd_export::TexturesArg,
     /// The scene to use instead of the bundle manifest's sources (checked against its fingerprint).
     #[arg(long = "scene", value_name = "SCENE")]
     pub scene_override: Vec<String>,
@@ -50,7 +56,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &args.path,
             &out,
             &[],
-            crate::cmd_export::Storage::default(),
+            crate::cmd_export::Storage {
+                textures: args.textures.into(),
+                ..Default::default()
+            },
             !args.no_near,
             &args.scene_override,
             false,
@@ -63,6 +72,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         out
     } else if args.path.join(lemi_export::INDEX_FILE).is_file() {
+        if args.textures != crate::cmd_export::TexturesArg::Png {
+            bail!(
+                "--textures applies to a bundle, not to an export directory ({} was exported \
+                 already)",
+                args.path.display()
+            );
+        }
         args.path.clone()
     } else {
         bail!(

@@ -10,7 +10,7 @@ use anyhow::{bail, Context};
 const VIEWER_FILES: [&str; 3] = ["index.html", "viewer.js", "predict.js"];
 
 /// The files of the three.js package the viewer imports, relative to `node_modules/three`.
-const THREE_FILES: [&str; 7] = [
+const THREE_FILES: [&str; 12] = [
     "LICENSE",
     "build/three.module.js",
     "build/three.core.js",
@@ -19,6 +19,13 @@ const THREE_FILES: [&str; 7] = [
     "examples/jsm/libs/meshopt_decoder.module.js",
     "examples/jsm/utils/BufferGeometryUtils.js",
     "examples/jsm/utils/SkeletonUtils.js",
+    // KTX2 textures (`--textures ktx2`): the container reader and the Zstandard decoder
+    // (WebAssembly inside the module); BC blocks need no Basis transcoder
+    "examples/jsm/loaders/KTX2Loader.js",
+    "examples/jsm/libs/ktx-parse.module.js",
+    "examples/jsm/libs/zstddec.module.js",
+    "examples/jsm/utils/WorkerPool.js",
+    "examples/jsm/math/ColorSpaces.js",
 ];
 
 /// `web/` of lemi's source tree, unless `--web-dir` says otherwise.

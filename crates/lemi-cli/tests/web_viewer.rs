@@ -3,7 +3,8 @@
 //! `web/tools/browser.mjs` through playwright-core), loads it at fixed cameras inside a cell and
 //! takes a screenshot; `lemi render BUNDLE` renders the same cameras. The two must cover the same
 //! pixels (≥ 99 % agreement) and look alike (mean FLIP below [`FLIP_BOUND`]). Also: the viewer's
-//! port of the prediction rule lists the cells the runtime's does, in the same order.
+//! port of the prediction rule lists the cells the runtime's does, in the same order; a BC1 bake
+//! served with its KTX2 textures shows the same picture from the blocks as stored.
 //!
 //! Skips, with the reason printed, where node, the node packages (`npm ci` in `web/`) or the
 //! browser are missing or the browser cannot start.
@@ -95,8 +96,9 @@ fn serve(args: &[&str]) -> (Server, String) {
     (server, line.trim().to_string())
 }
 
-/// Runs the browser driver; `None` (after a visible skip) when the browser cannot start.
-fn browser(web: &Path, url: &str, extra: &[&str]) -> Option<serde_json::Value> {
+/// Runs the browser driver; `None` (after a visible skip) when the browser cannot start, else
+/// whether the viewer succeeded and what the driver printed.
+fn browser_run(web: &Path, url: &str, extra: &[&str]) -> Option<(bool, serde_json::Value)> {
     let o = Command::new("node")
         .arg(web.join("tools/browser.mjs"))
         .arg(url)
@@ -110,8 +112,54 @@ fn browser(web: &Path, url: &str, extra: &[&str]) -> Option<serde_json::Value> {
         lemi_testkit::skip(&format!("{}", v["error"]));
         return None;
     }
-    assert!(o.status.success(), "the viewer failed: {v}");
+    Some((o.status.success(), v))
+}
+
+/// Runs the browser driver; `None` (after a visible skip) when the browser cannot start.
+fn browser(web: &Path, url: &str, extra: &[&str]) -> Option<serde_json::Value> {
+    let (ok, v) = browser_run(web, url, extra)?;
+    assert!(ok, "the viewer failed: {v}");
     Some(v)
+}
+
+/// Coverage agreement and mean FLIP of the browser's screenshot `shot` against lemi's render
+/// `reference` of the same `w`×`h` view with vertical fov `fov_y` (degrees).
+fn agreement(reference: &Path, shot: &Path, w: u32, h: u32, fov_y: f64) -> (f64, f32, String) {
+    let (r, t) = (frame(reference), frame(shot));
+    let c = lemi_eval::image_metrics::coverage(&r, &t).unwrap();
+    let n = (w * h) as f64;
+    let differing = (c.reference_covered - c.both) + (c.test_covered - c.both);
+    let agreement = 1.0 - differing as f64 / n;
+    let hfov = 2.0 * ((0.5 * fov_y.to_radians()).tan() * w as f64 / h as f64).atan();
+    let ppd = lemi_eval::image_metrics::ppd_for_view(w, hfov.to_degrees() as f32);
+    let flip = lemi_eval::image_metrics::flip(&r, &t, ppd).unwrap();
+    let note = format!(
+        "coverage agreement {:.4}% ({differing} of {n} pixels differ; lemi {} covered, browser {}), mean FLIP {:.5} at {ppd:.1} px/deg",
+        100.0 * agreement,
+        c.reference_covered,
+        c.test_covered,
+        flip.mean,
+    );
+    (agreement, flip.mean, note)
+}
+
+/// `lemi render BUNDLE` of one view into `out`.
+fn render(bundle: &Path, eye: &str, dir: &str, fov_y: f64, (w, h): (u32, u32), out: &Path) {
+    let o = lemi(&[
+        "render",
+        bundle.to_str().unwrap(),
+        "--eye",
+        eye,
+        "--dir",
+        dir,
+        "--fov",
+        &fov_y.to_string(),
+        "--size",
+        &format!("{w}x{h}"),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "render: {}", stderr(&o));
 }
 
 /// A PNG as a frame: covered where alpha is not 0.
@@ -181,43 +229,13 @@ fn the_browser_shows_what_lemi_renders() {
             return;
         };
         let reference = d.join(format!("{name}-lemi.png"));
-        let o = lemi(&[
-            "render",
-            bundle.to_str().unwrap(),
-            "--eye",
-            eye,
-            "--dir",
-            dir,
-            "--fov",
-            &fov_y.to_string(),
-            "--size",
-            &format!("{w}x{h}"),
-            "-o",
-            reference.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "render: {}", stderr(&o));
-        let (r, t) = (frame(&reference), frame(&shot));
-        let c = lemi_eval::image_metrics::coverage(&r, &t).unwrap();
-        let n = (w * h) as f64;
-        let differing = (c.reference_covered - c.both) + (c.test_covered - c.both);
-        let agreement = 1.0 - differing as f64 / n;
-        let hfov = 2.0 * ((0.5 * fov_y.to_radians()).tan() * w as f64 / h as f64).atan();
-        let ppd = lemi_eval::image_metrics::ppd_for_view(w, hfov.to_degrees() as f32);
-        let flip = lemi_eval::image_metrics::flip(&r, &t, ppd).unwrap();
-        eprintln!(
-            "{name}: coverage agreement {:.4}% ({differing} of {n} pixels differ; lemi {} covered, browser {}), mean FLIP {:.5} at {ppd:.1} px/deg ({})",
-            100.0 * agreement,
-            c.reference_covered,
-            c.test_covered,
-            flip.mean,
-            v["renderer"]
-        );
+        render(&bundle, eye, dir, fov_y, (w, h), &reference);
+        assert_eq!(v["texture_formats"], serde_json::json!(["RGBA8"]), "{v}");
+        let t = frame(&shot);
+        let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
+        eprintln!("{name}: {note} ({})", v["renderer"]);
         assert!(agreement >= 0.99, "{name}: coverage agreement {agreement}");
-        assert!(
-            flip.mean < FLIP_BOUND,
-            "{name}: mean FLIP {} ≥ {FLIP_BOUND}",
-            flip.mean
-        );
+        assert!(flip < FLIP_BOUND, "{name}: mean FLIP {flip} ≥ {FLIP_BOUND}");
         if name == "along-x" {
             // the layer colouring (key L, `tint=1`): the same pixels covered, the impostors
             // tinted by layer, the near geometry grey
@@ -250,6 +268,75 @@ fn the_browser_shows_what_lemi_renders() {
             );
         }
     }
+}
+
+/// A BC1 bake served with its KTX2 textures as stored (`lemi serve --textures ktx2`): the browser
+/// uploads the blocks (three.js's KTX2Loader, Zstandard inflated in the page) and shows what
+/// `lemi render` shows from the same blocks (lavapipe samples BC1 too).
+#[test]
+fn the_browser_shows_a_bc1_bake_from_its_ktx2_blocks() {
+    let Some(web) = browser_tools() else { return };
+    let d = tmp("web", "ktx2");
+    let bundle = d.join("b");
+    let mut args = vec!["bake"];
+    args.extend(SMALL);
+    args.extend(["--texture-format", "bc1", "-o", bundle.to_str().unwrap()]);
+    let o = lemi(&args);
+    assert!(o.status.success(), "bake: {}", stderr(&o));
+    let site = d.join("site");
+    let (_server, url) = serve(&[
+        bundle.to_str().unwrap(),
+        "-o",
+        site.to_str().unwrap(),
+        "--textures",
+        "ktx2",
+    ]);
+    let index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(site.join("cells.json")).unwrap()).unwrap();
+    assert_eq!(index["textures"], "ktx2", "{index}");
+    assert!(site
+        .join("vendor/three/examples/jsm/loaders/KTX2Loader.js")
+        .is_file());
+    let (w, h, fov_y) = (960u32, 540u32, 60.0f64);
+    let (eye, dir) = ("18,1.7,-2", "1,0,0");
+    let shot = d.join("ktx2-browser.png");
+    let page = format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
+    let size = format!("{w}x{h}");
+    let Some((ok, v)) = browser_run(
+        &web,
+        &page,
+        &["--screenshot", shot.to_str().unwrap(), "--size", &size],
+    ) else {
+        return;
+    };
+    if !ok {
+        let error = v["error"].as_str().unwrap_or_default();
+        // a browser without BC1 sampling gets the viewer's clear message, nothing else
+        assert!(
+            error.contains("which this browser lacks"),
+            "the viewer failed: {v}"
+        );
+        lemi_testkit::skip(&format!("this browser cannot sample BC1: {error}"));
+        return;
+    }
+    // the blocks were uploaded as they are, not decoded
+    assert_eq!(v["texture_formats"], serde_json::json!(["BC1"]), "{v}");
+    let reference = d.join("ktx2-lemi.png");
+    render(&bundle, eye, dir, fov_y, (w, h), &reference);
+    let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
+    eprintln!("ktx2: {note} ({})", v["renderer"]);
+    assert!(agreement >= 0.99, "coverage agreement {agreement}");
+    assert!(flip < FLIP_BOUND, "mean FLIP {flip} ≥ {FLIP_BOUND}");
+    // `--textures` on an export directory is a clear error (the textures are chosen at export)
+    let o = lemi(&[
+        "serve",
+        site.to_str().unwrap(),
+        "--textures",
+        "ktx2",
+        "--port",
+        "0",
+    ]);
+    common::assert_clean_error_all(&o, &["--textures", "export directory"]);
 }
 
 #[test]

@@ -248,7 +248,8 @@ fn texture_formats(m: &mut String, rows: &[Row], formats: &[FormatRow]) {
          PNG, the blocks for BC7 and BC1; share of the PNG bake's), the seconds of the bake's \
          encode stage (share of the cell's whole bake); *mean FLIP*, *PSNR*, *crack px* against \
          all geometry as above; *vs PNG*: the same views against the PNG bake's frames; \
-         *changed coverage px*: pixels covered in one of the two frames only (0 when the format \
-         keeps the alpha test exact)."
+         *changed coverage px*: pixels covered in one of the two frames only (the block formats \
+         keep every texel's alpha exact; see docs/COMPRESSION.md for the pixel or so that a \
+         different atlas layout can still change)."
     );
 }

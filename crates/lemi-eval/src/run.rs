@@ -120,8 +120,10 @@ impl TextureFootprint {
 
 /// The evaluated views of a bundle compared with the same views of another bake of the same
 /// scene and cells (e.g. a block-compressed bake against its PNG bake): what the other bake's
-/// frame would have shown instead. A texture format that keeps the alpha test exact changes no
-/// pixel's coverage.
+/// frame would have shown instead. A texture format that keeps every texel's alpha exact
+/// changes no pixel's coverage where both bakes pack their atlases alike; where the packings
+/// differ (the block formats pad micro-textures to 4×4 blocks, PNG does not), a fragment on a
+/// texel edge can still round to the neighbouring texel (about one pixel in ten million).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct AgainstResult {
     pub bundle: std::path::PathBuf,
