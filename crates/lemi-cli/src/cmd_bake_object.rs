@@ -103,8 +103,12 @@ pub struct Args {
     /// Allowed parallax angle α in degrees instead of an output view.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha_deg: Option<f64>,
-    /// How the macro-textures are stored: png, bc7 or bc1 (as `lemi bake`).
-    #[arg(long, default_value = "png", value_parser = crate::cmd_bake::parse_texture_format)]
+    /// How the macro-textures are stored: bc1 (the default), bc7 or png (as `lemi bake`).
+    #[arg(
+        long,
+        default_value = crate::cmd_bake::DEFAULT_TEXTURE_FORMAT.name(),
+        value_parser = crate::cmd_bake::parse_texture_format
+    )]
     pub texture_format: TextureFormat,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]

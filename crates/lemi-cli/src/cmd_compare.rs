@@ -95,9 +95,10 @@ pub struct Args {
     /// Evaluation image size (default: the bake's output view).
     #[arg(long, value_parser = crate::cmd_render::parse_size)]
     pub eval_size: Option<(u32, u32)>,
-    /// Also bake the `lemi` strategy with these texture formats (comma-separated: bc7, bc1;
-    /// png is the `lemi` row itself) and report each one's disk bytes, texture memory, encode
-    /// seconds and image cost against the reference and the PNG bake.
+    /// Also bake the `lemi` strategy with these texture formats (comma-separated: png, bc7, bc1;
+    /// the strategies are baked with the bake's default, bc1) and report each one's disk bytes,
+    /// texture memory, encode seconds and image cost against the reference and, with png among
+    /// them, against the PNG bake.
     #[arg(long, value_delimiter = ',', value_parser = crate::cmd_bake::parse_texture_format)]
     pub texture_formats: Vec<TextureFormat>,
     /// GPU backend: auto, vulkan or gl.
@@ -153,7 +154,8 @@ pub fn run(args: Args) -> Result<()> {
             eprintln!("[{:>6.1} s] {m}", t0.elapsed().as_secs_f64());
         }
     };
-    let bake_one = |k: StrategyKind, f: TextureFormat, dir: &Path| bake(&args, k, f, dir, &gpu);
+    let bake_one =
+        |k: StrategyKind, f: Option<TextureFormat>, dir: &Path| bake(&args, k, f, dir, &gpu);
     let done = lemi_compare::run(&gpu, &options, bake_one, say)?;
     if let Some(e) = &done.plot_error {
         eprintln!("warning: no plot ({e})");
@@ -186,12 +188,12 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Bakes the layered strategy `k` with `format` textures into `dir`: the job `lemi bake` builds
-/// from the same flags.
+/// Bakes the layered strategy `k` with `format` textures (`None`: `lemi bake`'s default) into
+/// `dir`: the job `lemi bake` builds from the same flags.
 fn bake(
     args: &Args,
     k: StrategyKind,
-    format: TextureFormat,
+    format: Option<TextureFormat>,
     dir: &Path,
     gpu: &Gpu,
 ) -> Result<BakeRow> {

@@ -105,7 +105,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard: None,
         backend: args.backend.clone(),
         json: false,
-        texture_format: Default::default(),
+        texture_format: None,
     })?;
 
     // From the corner of the first cell, looking down the avenue.

@@ -51,7 +51,9 @@ fn equidistant_and_cubemap_bake_and_say_so() {
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["strategy"], "equidistant", "{v}");
     assert_eq!(v["baked"], 1, "{v}");
-    assert!(v["png_bytes"].as_u64().unwrap() > 0, "{v}");
+    // textures in the default format, BC1
+    assert_eq!(v["texture_format"], "bc1", "{v}");
+    assert!(v["texture_bytes"].as_u64().unwrap() > 0, "{v}");
     let p = manifest_params(&equi);
     assert_eq!(p["layering"]["equidistant"]["overlap"], 0.25, "{p}");
 

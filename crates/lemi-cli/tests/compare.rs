@@ -86,30 +86,53 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
         "--eval-size",
         "96x54",
         "--texture-formats",
-        "bc1",
+        "png,bc1",
         "-o",
         out.to_str().unwrap(),
         "--json",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    // `lemi` also baked with BC1 textures, evaluated against the reference and the PNG bake
+    // `lemi` (baked with the default BC1 textures) and a PNG bake of it, each evaluated against
+    // the reference, BC1 against the PNG bake too
     let formats = v["texture_formats"].as_array().unwrap();
-    assert_eq!(formats.len(), 1, "{v}");
-    let bc1 = &formats[0];
-    assert_eq!(bc1["format"], "bc1", "{bc1}");
-    assert!(bc1["errors"].as_array().unwrap().is_empty(), "{bc1}");
-    assert_eq!(bc1["eval"]["textures"]["format"], "bc1", "{bc1}");
+    let names: Vec<&str> = formats
+        .iter()
+        .map(|f| f["format"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["png", "bc1"], "{v}");
+    let (png, bc1) = (&formats[0], &formats[1]);
+    for f in formats {
+        assert!(f["errors"].as_array().unwrap().is_empty(), "{f}");
+        assert_eq!(f["eval"]["textures"]["format"], f["format"], "{f}");
+        assert_eq!(f["eval"]["crack_pixels"], 0, "{f}");
+    }
+    assert!(png["against_png"].is_null(), "{png}");
+    assert!(
+        png["bundle"].as_str().unwrap().ends_with("lemi-png"),
+        "{png}"
+    );
+    assert!(
+        bc1["bundle"].as_str().unwrap().ends_with("lemi"),
+        "the lemi row's own bake: {bc1}"
+    );
     assert_eq!(bc1["against_png"]["format"], "png", "{bc1}");
     assert_eq!(bc1["against_png"]["coverage_mismatch_pixels"], 0, "{bc1}");
-    assert_eq!(bc1["eval"]["crack_pixels"], 0, "{bc1}");
     assert!(
         bc1["bake"]["per_cell"][0]["stage_seconds"]["bc1"].is_number(),
         "{bc1}"
     );
+    assert!(
+        png["bake"]["per_cell"][0]["stage_seconds"]["png"].is_number(),
+        "{png}"
+    );
     let rows = v["strategies"].as_array().unwrap();
+    assert_eq!(
+        rows[0]["eval"]["textures"]["format"], "bc1",
+        "the bake's default"
+    );
     let (png_memory, bc1_memory) = (
-        rows[0]["eval"]["textures"]["texture_memory_bytes_per_cell"]
+        png["eval"]["textures"]["texture_memory_bytes_per_cell"]
             .as_f64()
             .unwrap(),
         bc1["eval"]["textures"]["texture_memory_bytes_per_cell"]
@@ -154,7 +177,8 @@ fn compare_runs_every_strategy_and_writes_the_tables() {
     }
     assert!(md.contains("lemi compare"), "the command is recorded");
     assert!(md.contains("## Texture formats of the `lemi` bake"), "{md}");
-    assert!(md.contains("| png |") && md.contains("| bc1 |"), "{md}");
+    assert_eq!(md.matches("| png |").count(), 1, "{md}");
+    assert_eq!(md.matches("| bc1 |").count(), 1, "{md}");
     // speed-ups against geometry-culled, the unculled one beside; comparison.json carries both
     assert!(
         md.contains("speed-up vs culled | speed-up vs unculled"),

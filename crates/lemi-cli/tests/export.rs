@@ -397,6 +397,9 @@ fn dense_cells_export_compressed() {
         "512",
         "--layers",
         "64",
+        // the ratio of PNG exports to PNG cell files (the same texture format)
+        "--texture-format",
+        "png",
         "-o",
         bundle.to_str().unwrap(),
     ]);
@@ -592,9 +595,9 @@ fn missing_damaged_and_foreign_bundles_are_clear_errors() {
     )
     .unwrap();
     assert_clean_error_all(&export(&foreign, &out, &[]), &["manifest.json", "lemi"]);
-    // a damaged cell file
+    // a damaged cell file (of a PNG bake: --textures ktx2 below needs block textures)
     let bundle = d.join("b");
-    bake(&bundle, &[]);
+    bake(&bundle, &["--texture-format", "png"]);
     let cell = bundle.join("cells/1_0_0.lemicell");
     let mut bytes = std::fs::read(&cell).unwrap();
     let n = bytes.len();

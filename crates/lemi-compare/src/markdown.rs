@@ -178,8 +178,8 @@ pub fn render_markdown(
     m
 }
 
-/// The table of the `lemi` bake per texture format: the PNG bake (the `lemi` strategy's row)
-/// first, then every further format against it.
+/// The table of the `lemi` bake per texture format: the `lemi` strategy's own bake first, then
+/// every further format, each against the PNG bake where there is one.
 fn texture_formats(m: &mut String, rows: &[Row], formats: &[FormatRow]) {
     let _ = writeln!(m, "\n## Texture formats of the `lemi` bake\n");
     let _ = writeln!(
@@ -187,10 +187,18 @@ fn texture_formats(m: &mut String, rows: &[Row], formats: &[FormatRow]) {
         "| format | cell file/cell | textures on disk/cell | texture memory/cell | encode s/cell | mean FLIP | PSNR dB | crack px | FLIP vs PNG | PSNR vs PNG | changed coverage px |"
     );
     let _ = writeln!(m, "|---|---|---|---|---|---|---|---|---|---|---|");
-    let png = rows.iter().find(|r| r.strategy == StrategyKind::Lemi);
-    let png_memory = png
+    let lemi = rows.iter().find(|r| r.strategy == StrategyKind::Lemi);
+    let lemi_textures = lemi
         .and_then(|r| r.eval.as_ref())
-        .and_then(|e| e.textures.as_ref())
+        .and_then(|e| e.textures.as_ref());
+    // the PNG bake's texture memory, the 100 % of the memory column
+    let png_memory = lemi_textures
+        .filter(|t| t.format.is_png())
+        .or_else(|| {
+            (formats.iter())
+                .filter(|f| f.format.is_png())
+                .find_map(|f| f.eval.as_ref().and_then(|e| e.textures.as_ref()))
+        })
         .map(|t| t.texture_memory_bytes_per_cell);
     let mut line = |format: TextureFormat,
                     bake: Option<&BakeRow>,
@@ -230,8 +238,11 @@ fn texture_formats(m: &mut String, rows: &[Row], formats: &[FormatRow]) {
             against.map_or_else(dash, |a| a.coverage_mismatch_pixels.to_string()),
         );
     };
-    if let Some(r) = png {
-        line(TextureFormat::Png, r.bake.as_ref(), r.eval.as_ref(), None);
+    // the `lemi` strategy's own bake, unless it is one of the format rows
+    if let (Some(r), Some(t)) = (lemi, lemi_textures) {
+        if !formats.iter().any(|f| f.format == t.format) {
+            line(t.format, r.bake.as_ref(), r.eval.as_ref(), None);
+        }
     }
     for f in formats {
         line(

@@ -39,8 +39,9 @@ pub struct CompareOptions {
     /// The command that made the comparison (recorded in `COMPARISON.md` and `comparison.json`).
     pub command: String,
     /// Texture formats the `lemi` strategy is also baked in (`OUT/lemi-FORMAT`) and evaluated,
-    /// each against the reference and against the PNG bake, the `lemi` strategy's own (PNG is
-    /// that row and not baked twice). Empty: none.
+    /// each against the reference and against the PNG bake (the `lemi` strategy's own when it
+    /// is PNG, else `OUT/lemi-png` when listed); the `lemi` strategy's own format is not baked
+    /// twice. Empty: none.
     pub texture_formats: Vec<TextureFormat>,
 }
 
@@ -119,13 +120,13 @@ enum StepError {
 }
 
 /// Runs the comparison: `bake(kind, format, dir)` bakes the layered strategy `kind` with
-/// macro-textures in `format` into `dir` (the `lemi` bundle is baked too when `warp` or
-/// `dynamic` is compared or texture formats are); `progress` is told what starts. Writes the
-/// files into `options.out`.
+/// macro-textures in `format` (`None`: the bake's default) into `dir` (the `lemi` bundle is
+/// baked too when `warp` or `dynamic` is compared or texture formats are); `progress` is told
+/// what starts. Writes the files into `options.out`.
 pub fn run<E: std::fmt::Display>(
     gpu: &Arc<Gpu>,
     options: &CompareOptions,
-    mut bake: impl FnMut(StrategyKind, TextureFormat, &Path) -> Result<BakeRow, E>,
+    mut bake: impl FnMut(StrategyKind, Option<TextureFormat>, &Path) -> Result<BakeRow, E>,
     mut progress: impl FnMut(&str),
 ) -> Result<ComparisonRun, CompareError> {
     check_strategies(&options.strategies)?;
@@ -140,9 +141,7 @@ pub fn run<E: std::fmt::Display>(
 
     // 1. bakes
     let mut bake_list: Vec<StrategyKind> = kinds.iter().copied().filter(|k| k.is_baked()).collect();
-    let formats: Vec<TextureFormat> = (options.texture_formats.iter().copied())
-        .filter(|f| !f.is_png())
-        .collect();
+    let formats = &options.texture_formats;
     if (kinds.iter().any(|k| !k.is_baked()) || !formats.is_empty())
         && !bake_list.contains(&StrategyKind::Lemi)
     {
@@ -152,16 +151,22 @@ pub fn run<E: std::fmt::Display>(
     for &k in &bake_list {
         let dir = out.join(k.name());
         progress(&format!("baking {k} into {}", dir.display()));
-        let row = bake(k, TextureFormat::Png, &dir).map_err(|e| format!("bake ({k}): {e:#}"));
+        let row = bake(k, None, &dir).map_err(|e| format!("bake ({k}): {e:#}"));
         bakes.push((k, row));
     }
+    let lemi_dir = out.join(StrategyKind::Lemi.name());
+    let lemi_format = Bundle::open(&lemi_dir)
+        .ok()
+        .map(|b| b.manifest().params.texture_format);
     let mut format_rows = Vec::new();
-    for &f in &formats {
-        let dir = out.join(format!("lemi-{}", f.name()));
-        progress(&format!(
-            "baking lemi with {f} textures into {}",
-            dir.display()
-        ));
+    for &f in formats {
+        // the `lemi` strategy's own format is its bake, not baked twice
+        let own = Some(f) == lemi_format;
+        let dir = if own {
+            lemi_dir.clone()
+        } else {
+            out.join(format!("lemi-{}", f.name()))
+        };
         let mut row = FormatRow {
             format: f,
             bundle: dir.clone(),
@@ -170,9 +175,19 @@ pub fn run<E: std::fmt::Display>(
             against_png: None,
             errors: Vec::new(),
         };
-        match bake(StrategyKind::Lemi, f, &dir) {
-            Ok(b) => row.bake = Some(b),
-            Err(e) => row.errors.push(format!("bake (lemi, {f}): {e:#}")),
+        if own {
+            row.bake = (bakes.iter())
+                .find(|(k, _)| *k == StrategyKind::Lemi)
+                .and_then(|(_, b)| b.as_ref().ok().cloned());
+        } else {
+            progress(&format!(
+                "baking lemi with {f} textures into {}",
+                dir.display()
+            ));
+            match bake(StrategyKind::Lemi, Some(f), &dir) {
+                Ok(b) => row.bake = Some(b),
+                Err(e) => row.errors.push(format!("bake (lemi, {f}): {e:#}")),
+            }
         }
         format_rows.push(row);
     }
@@ -244,10 +259,17 @@ pub fn run<E: std::fmt::Display>(
         rows.push(row);
     }
 
-    let png_dir = out.join(StrategyKind::Lemi.name());
+    // the PNG bake every other format is compared with, if there is one
+    let png_dir = match lemi_format {
+        Some(TextureFormat::Png) => Some(lemi_dir.clone()),
+        _ => (format_rows.iter())
+            .find(|r| r.format.is_png() && r.bake.is_some())
+            .map(|r| r.bundle.clone()),
+    };
     for row in format_rows.iter_mut().filter(|r| r.bake.is_some()) {
         progress(&format!("evaluating lemi with {} textures", row.format));
-        if let Err(e) = eval_format(options, gpu, row, &png_dir) {
+        let against = png_dir.as_deref().filter(|_| !row.format.is_png());
+        if let Err(e) = eval_format(options, gpu, row, against) {
             row.errors
                 .push(format!("eval (lemi, {}): {}", row.format, error_chain(&e)));
         }
@@ -344,23 +366,29 @@ fn walk(
 }
 
 /// Evaluates the `lemi` bake of `row`'s texture format at the comparison's viewpoints, against
-/// the reference and against the PNG bake in `png_dir`; the report goes to `OUT/eval-lemi-F`.
+/// the reference and against the PNG bake in `png_dir` if there is one; the report goes to
+/// `OUT/eval-lemi-F`.
 fn eval_format(
     options: &CompareOptions,
     gpu: &Arc<Gpu>,
     row: &mut FormatRow,
-    png_dir: &Path,
+    png_dir: Option<&Path>,
 ) -> Result<(), StepError> {
     let opened = lemi_scene::open_bundle(&row.bundle, &[], None)
         .map_err(|e| StepError::Open(StrategyKind::Lemi, e))?;
-    let png = Bundle::open(png_dir)
-        .map_err(|e| StepError::Eval(EvalError::Job(format!("{}: {e}", png_dir.display()))))?;
+    let png = match png_dir {
+        None => None,
+        Some(d) => Some(
+            Bundle::open(d)
+                .map_err(|e| StepError::Eval(EvalError::Job(format!("{}: {e}", d.display()))))?,
+        ),
+    };
     let t = Instant::now();
     let run = lemi_eval::evaluate_bundle_against(
         gpu,
         &opened.bundle,
         &opened.scene,
-        Some(&png),
+        png.as_ref(),
         &options.eval,
         |_, _, _| {},
     )?;
