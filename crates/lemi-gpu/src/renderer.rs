@@ -98,7 +98,7 @@ pub fn padded_bytes_per_row(width: u32, bytes_per_texel: u32) -> u32 {
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::RenderPipeline,
+    pipelines: GeometryPipelines,
     globals: wgpu::Buffer,
     globals_group: wgpu::BindGroup,
     max_dim: u32,
@@ -120,48 +120,8 @@ impl Renderer {
                 bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
                 immediate_size: 0,
             });
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("lemi reference renderer"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[
-                        Some(wgpu::ColorTargetState {
-                            format: COLOR_FORMAT,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        }),
-                        Some(wgpu::ColorTargetState {
-                            format: VIEW_DEPTH_FORMAT,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        }),
-                    ],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let pipelines =
+                GeometryPipelines::new(device, &layout, &module, "lemi reference renderer");
             let globals = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("lemi globals"),
                 size: std::mem::size_of::<ShadingGlobals>() as u64,
@@ -179,7 +139,7 @@ impl Renderer {
             Renderer {
                 device: gpu.device.clone(),
                 queue: gpu.queue.clone(),
-                pipeline,
+                pipelines,
                 globals,
                 globals_group,
                 max_dim: gpu.limits().max_texture_dimension_2d,
@@ -357,7 +317,7 @@ impl Renderer {
                 });
             {
                 let mut pass = targets.begin_timed_pass(&mut encoder, "lemi reference pass");
-                pass.set_pipeline(&self.pipeline);
+                pass.set_pipeline(self.pipelines.for_cutoff(options.alpha_cutoff));
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
                 let mut buffers: Option<&GpuChunk> = None;
@@ -388,6 +348,86 @@ impl Renderer {
             options.clear,
             &self.last_gpu,
         )
+    }
+}
+
+/// The pipelines that draw geometry with the shared shading (`render.wgsl`), into the colour and
+/// view-depth targets with the reverse-Z depth test, no culling (polygon soups): one with the
+/// alpha test, and one without it for a cutoff of 0 (the default), which no albedo is below, so
+/// both draw the same pixels; without the shader's `discard` the rasterizer may test depth
+/// before shading (Mesa's does), as any renderer draws opaque geometry.
+pub(crate) struct GeometryPipelines {
+    masked: wgpu::RenderPipeline,
+    opaque: wgpu::RenderPipeline,
+}
+
+impl GeometryPipelines {
+    /// Both pipelines from `module` (the shading module with `render.wgsl`) with `layout`
+    /// (globals and material bind groups).
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        layout: &wgpu::PipelineLayout,
+        module: &wgpu::ShaderModule,
+        label: &str,
+    ) -> GeometryPipelines {
+        let targets = [
+            Some(wgpu::ColorTargetState {
+                format: COLOR_FORMAT,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            }),
+            Some(wgpu::ColorTargetState {
+                format: VIEW_DEPTH_FORMAT,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            }),
+        ];
+        let pipeline = |fragment: &str| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(layout),
+                vertex: wgpu::VertexState {
+                    module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some(fragment),
+                    compilation_options: Default::default(),
+                    targets: &targets,
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        GeometryPipelines {
+            masked: pipeline("fs_main"),
+            opaque: pipeline("fs_main_opaque"),
+        }
+    }
+
+    /// The pipeline for an alpha cutoff: the one without the test when nothing can be below it.
+    pub(crate) fn for_cutoff(&self, cutoff: f32) -> &wgpu::RenderPipeline {
+        if cutoff > 0.0 {
+            &self.masked
+        } else {
+            &self.opaque
+        }
     }
 }
 

@@ -360,3 +360,49 @@ fn oversized_image_is_an_error() {
         .map(|e| e.to_string());
     assert!(e.is_some_and(|e| e.contains("image size")));
 }
+
+/// Geometry is drawn without the shader's alpha test when the cutoff is 0 (the default, which no
+/// alpha is below), so the rasterizer may test depth before shading: the picture is the one the
+/// alpha-tested pipeline draws, texel for texel, on a scene of interpenetrating surfaces (depth
+/// order decided per pixel) whose texture alpha is never 0; and a positive cutoff still discards.
+#[test]
+fn geometry_without_the_alpha_test_draws_what_the_alpha_test_draws() {
+    let Some(gpu) = gpu() else { return };
+    let mut scene = bumpy_scene(24);
+    // a texture whose alpha steps through 1..=255 (never 0), on the second surface
+    let rgba: Vec<u8> = (0..64u32)
+        .flat_map(|i| [200, (4 * i) as u8, 90, (1 + 4 * i).min(255) as u8])
+        .collect();
+    scene.textures.push(Texture {
+        name: "alpha steps".into(),
+        width: 8,
+        height: 8,
+        rgba8: rgba,
+    });
+    scene.materials[1].texture = Some(0);
+    let gs = GpuScene::upload(&gpu, &scene, &UploadOptions::default()).expect("upload");
+    let r = Renderer::new(&gpu).expect("renderer");
+    let draw = |cutoff: f32| {
+        let options = RenderOptions {
+            alpha_cutoff: cutoff,
+            ..Default::default()
+        };
+        r.render(&gs, &camera().view(), &options).expect("render")
+    };
+    // cutoff 0: the pipeline without the test; the smallest positive cutoff: the alpha-tested
+    // one, which discards nothing here (every alpha is at least 1/255)
+    let (opaque, masked) = (draw(0.0), draw(f32::MIN_POSITIVE));
+    assert!(opaque.covered_count() > 1000);
+    assert!(
+        opaque == masked,
+        "the two pipelines draw different pictures"
+    );
+    // half the texture's alpha is below 0.5: those fragments are discarded
+    let cut = draw(0.5);
+    assert!(
+        cut.covered_count() < opaque.covered_count(),
+        "a cutoff of 0.5 discards: {} of {} pixels covered",
+        cut.covered_count(),
+        opaque.covered_count()
+    );
+}

@@ -15,7 +15,7 @@ use crate::renderer::{
     Frame, GpuTime, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
 };
 use crate::scene::{GpuChunk, GpuMaterials};
-use crate::shading::{vertex_layout, ShadingGlobals, SHADING_WGSL};
+use crate::shading::{ShadingGlobals, SHADING_WGSL};
 use crate::targets::{PassPart, Targets, LINEAR_COLOR_FORMAT};
 use crate::{Gpu, GpuError};
 
@@ -46,7 +46,7 @@ pub struct Composite<'a> {
 pub struct ImpostorRenderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    near_pipeline: wgpu::RenderPipeline,
+    near_pipelines: crate::renderer::GeometryPipelines,
     /// Quads some of whose texels fail the alpha test (`fs_quad`, with `discard`).
     quad_pipeline: wgpu::RenderPipeline,
     /// Quads all of whose texels pass it (`fs_quad_opaque`, no `discard`).
@@ -99,27 +99,12 @@ impl ImpostorRenderer {
                 bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
                 immediate_size: 0,
             });
-            let near_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("lemi impostor renderer: near geometry"),
-                layout: Some(&near_layout),
-                vertex: wgpu::VertexState {
-                    module: &near_module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive,
-                depth_stencil: depth_stencil.clone(),
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &near_module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &color_targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let near_pipelines = crate::renderer::GeometryPipelines::new(
+                device,
+                &near_layout,
+                &near_module,
+                "lemi impostor renderer: near geometry",
+            );
             // Quads.
             let quad_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("lemi impostor renderer: quads"),
@@ -184,7 +169,7 @@ impl ImpostorRenderer {
             ImpostorRenderer {
                 device: gpu.device.clone(),
                 queue: gpu.queue.clone(),
-                near_pipeline,
+                near_pipelines,
                 quad_pipeline,
                 opaque_pipeline,
                 macro_format,
@@ -399,7 +384,7 @@ impl ImpostorRenderer {
                 true,
             );
             if draw_near {
-                pass.set_pipeline(&self.near_pipeline);
+                pass.set_pipeline(self.near_pipelines.for_cutoff(options.alpha_cutoff));
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
                 let whole = parts.geometry.len();
