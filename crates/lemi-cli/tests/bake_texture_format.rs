@@ -171,22 +171,11 @@ fn eval_against_the_png_bake_reports_the_formats_image_cost() {
         stderr(&o)
     );
     // another scene's bake, a missing bundle and a gate without --against are clear errors
-    let o = lemi(&[
-        "bake",
-        "builtin:city:20k:4",
-        "--region",
-        "15,1.7,-5,25,1.7,5",
-        "--cell-size",
-        "10",
-        "--resolution",
-        "64",
-        "--layers",
-        "4",
-        "--alpha-deg",
-        "0.5",
-        "-o",
-        foreign,
-    ]);
+    // the same flags on another seed of the city
+    let mut args = vec!["bake", "builtin:city:20k:4"];
+    args.extend(&SMALL[1..]);
+    args.extend(["-o", foreign]);
+    let o = lemi(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_clean_error_all(
         &eval(bc1, &["--against", foreign]),

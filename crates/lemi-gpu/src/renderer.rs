@@ -351,6 +351,37 @@ impl Renderer {
     }
 }
 
+/// The colour targets of a frame: sRGB colour and the view depth's bits.
+pub(crate) fn frame_targets() -> [Option<wgpu::ColorTargetState>; 2] {
+    [COLOR_FORMAT, VIEW_DEPTH_FORMAT].map(|format| {
+        Some(wgpu::ColorTargetState {
+            format,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })
+    })
+}
+
+/// The depth state of a frame: reverse-Z (`Greater`, cleared to 0), written.
+pub(crate) fn frame_depth_stencil() -> wgpu::DepthStencilState {
+    wgpu::DepthStencilState {
+        format: DEPTH_FORMAT,
+        depth_write_enabled: Some(true),
+        depth_compare: Some(wgpu::CompareFunction::Greater),
+        stencil: Default::default(),
+        bias: Default::default(),
+    }
+}
+
+/// Triangle lists, no culling (scenes are polygon soups without consistent winding).
+pub(crate) fn frame_primitive() -> wgpu::PrimitiveState {
+    wgpu::PrimitiveState {
+        topology: wgpu::PrimitiveTopology::TriangleList,
+        cull_mode: None,
+        ..Default::default()
+    }
+}
+
 /// The pipelines that draw geometry with the shared shading (`render.wgsl`), into the colour and
 /// view-depth targets with the reverse-Z depth test, no culling (polygon soups): one with the
 /// alpha test, and one without it for a cutoff of 0 (the default), which no albedo is below, so
@@ -370,18 +401,7 @@ impl GeometryPipelines {
         module: &wgpu::ShaderModule,
         label: &str,
     ) -> GeometryPipelines {
-        let targets = [
-            Some(wgpu::ColorTargetState {
-                format: COLOR_FORMAT,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            }),
-            Some(wgpu::ColorTargetState {
-                format: VIEW_DEPTH_FORMAT,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            }),
-        ];
+        let targets = frame_targets();
         let pipeline = |fragment: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -392,18 +412,8 @@ impl GeometryPipelines {
                     compilation_options: Default::default(),
                     buffers: &[Some(vertex_layout())],
                 },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
+                primitive: frame_primitive(),
+                depth_stencil: Some(frame_depth_stencil()),
                 multisample: wgpu::MultisampleState::default(),
                 fragment: Some(wgpu::FragmentState {
                     module,

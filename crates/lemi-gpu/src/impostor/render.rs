@@ -11,9 +11,7 @@ use lemi_core::enclosure::Window;
 use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF};
 use super::upload::{macro_format, macro_layout};
 use super::ImpostorCell;
-use crate::renderer::{
-    Frame, GpuTime, RenderOptions, COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT,
-};
+use crate::renderer::{Frame, GpuTime, RenderOptions};
 use crate::scene::{GpuChunk, GpuMaterials};
 use crate::shading::{ShadingGlobals, SHADING_WGSL};
 use crate::targets::{PassPart, Targets, LINEAR_COLOR_FORMAT};
@@ -65,30 +63,9 @@ impl ImpostorRenderer {
     pub fn new(gpu: &Gpu) -> Result<ImpostorRenderer, GpuError> {
         gpu.scoped("creating the impostor render pipelines", || {
             let device = &gpu.device;
-            let color_targets = [
-                Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                }),
-                Some(wgpu::ColorTargetState {
-                    format: VIEW_DEPTH_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                }),
-            ];
-            let depth_stencil = Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            });
-            let primitive = wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            };
+            let color_targets = crate::renderer::frame_targets();
+            let depth_stencil = Some(crate::renderer::frame_depth_stencil());
+            let primitive = crate::renderer::frame_primitive();
             // Near geometry: the reference renderer's exact source and state.
             let near_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("lemi impostor renderer: near geometry"),
