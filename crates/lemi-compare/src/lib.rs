@@ -22,9 +22,8 @@ mod run;
 use std::path::PathBuf;
 
 pub use markdown::render_markdown;
-pub use rows::{
-    encode_seconds_per_cell, BakeRow, Comparison, EvalRow, FormatRow, GeometryTimes, Row,
-};
+pub(crate) use rows::encode_seconds_per_cell;
+pub use rows::{BakeRow, Comparison, EvalRow, FormatRow, GeometryTimes, Row};
 pub use run::{bake, check_strategies, run, CompareOptions, ComparisonRun};
 
 /// What stops a comparison as a whole (a strategy's own failure is kept in its [`Row`]).

@@ -125,7 +125,7 @@ pub struct FormatRow {
 
 /// Seconds per baked cell spent encoding the macro-textures (the bake stage named by the
 /// format), and the whole bake's seconds per cell.
-pub fn encode_seconds_per_cell(bake: &BakeRow, format: TextureFormat) -> Option<(f64, f64)> {
+pub(crate) fn encode_seconds_per_cell(bake: &BakeRow, format: TextureFormat) -> Option<(f64, f64)> {
     let baked: Vec<_> = bake
         .per_cell
         .iter()

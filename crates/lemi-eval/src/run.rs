@@ -82,7 +82,7 @@ pub struct EvalRun {
 /// What the evaluated cells of a layered bundle take, per cell: the cell file on disk, its
 /// macro-textures as stored (PNG or KTX2), and the texture memory they occupy in their stored
 /// format (RGBA8 for PNG, the blocks for BC7 and BC1).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct TextureFootprint {
     pub format: TextureFormat,
     pub cells: u64,
@@ -161,6 +161,7 @@ impl AgainstResult {
 }
 
 /// Accumulates [`AgainstResult`] view by view.
+#[derive(Default)]
 struct AgainstAcc {
     views: u64,
     flip_sum: f64,
@@ -172,18 +173,6 @@ struct AgainstAcc {
 }
 
 impl AgainstAcc {
-    fn new() -> Self {
-        AgainstAcc {
-            views: 0,
-            flip_sum: 0.0,
-            max_flip: 0.0,
-            mse_sum: 0.0,
-            differing: 0,
-            coverage: 0,
-            pixels: 0,
-        }
-    }
-
     fn add(&mut self, other: &Frame, this: &Frame, ppd: f32) -> Result<(), EvalError> {
         let flip = crate::flip(other, this, ppd)?;
         self.flip_sum += flip.mean as f64;
@@ -529,10 +518,7 @@ impl<'a> LayeredCells<'a> {
             current: None,
             footprint: TextureFootprint {
                 format: bundle.manifest().params.texture_format,
-                cells: 0,
-                disk_bytes_per_cell: 0.0,
-                texture_bytes_per_cell: 0.0,
-                texture_memory_bytes_per_cell: 0.0,
+                ..Default::default()
             },
         })
     }
@@ -642,7 +628,7 @@ fn evaluate_views(
     let mut worst = WorstSet::new(WORST_PER_BUNDLE);
     let mut points_per_cell = Vec::new();
     let mut breakdown = Vec::new();
-    let mut against_acc = AgainstAcc::new();
+    let mut against_acc = AgainstAcc::default();
     for id in &ids {
         let cell = manifest
             .grid
