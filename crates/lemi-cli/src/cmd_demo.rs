@@ -144,6 +144,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         clear: [150, 190, 235, 255],
         frames: 1,
         json: false,
+        texel_filter: crate::cmd_render::TexelFilterArg::Footprint,
         compare: true,
         scene_override: Vec::new(),
         with_object: Vec::new(),

@@ -70,6 +70,12 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// With a BUNDLE: how impostor pixels take their colour from the texels: `footprint` (the
+    /// default: where a texel spans less than two pixels, the mean of the opaque texels over the
+    /// pixel's footprint, so minified far quads do not shimmer) or `nearest` (the texel under the
+    /// pixel's centre, exactly as baked). Coverage is the same in both.
+    #[arg(long, value_enum, default_value = "footprint")]
+    pub texel_filter: TexelFilterArg,
     /// With a BUNDLE: write reference | impostor | difference side by side (difference: black where
     /// equal, the amplified colour difference elsewhere, red at crack pixels as `lemi eval` counts
     /// them).
@@ -302,7 +308,8 @@ fn run_bundle(args: Args, backend: BackendChoice) -> anyhow::Result<()> {
     let impostor_cell = lemi_gpu::ImpostorCell::upload_file(&gpu, materials, &scene, &file)
         .with_context(|| format!("{}: uploading the cell", bundle.display()))?;
     let upload_seconds = t.elapsed().as_secs_f64();
-    let renderer = lemi_gpu::ImpostorRenderer::new(&gpu)?;
+    let mut renderer = lemi_gpu::ImpostorRenderer::new(&gpu)?;
+    renderer.set_texel_filter(args.texel_filter.into());
     let options = RenderOptions {
         clear: args.clear,
         ..Default::default()
@@ -635,4 +642,20 @@ fn save_depth(frame: &Frame, path: &Path) -> anyhow::Result<()> {
         }
     };
     bytes.with_context(|| format!("writing {} (--depth)", path.display()))
+}
+
+/// `--texel-filter`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TexelFilterArg {
+    Footprint,
+    Nearest,
+}
+
+impl From<TexelFilterArg> for lemi_gpu::TexelFilter {
+    fn from(a: TexelFilterArg) -> Self {
+        match a {
+            TexelFilterArg::Footprint => lemi_gpu::TexelFilter::Footprint,
+            TexelFilterArg::Nearest => lemi_gpu::TexelFilter::Nearest,
+        }
+    }
 }

@@ -17,6 +17,7 @@
 //! ```text
 //! cargo run --release -p lemi-gpu --example frame_timing -- [BUNDLE] [--reps N] [--cells K]
 //!     [--size WxH] [--fov DEG] [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]
+//!     [--texel-filter footprint|nearest]
 //! ```
 //!
 //! `BUNDLE` defaults to `/tmp/bw` (the scene is rebuilt from the manifest's sources). `--cells K`
@@ -44,7 +45,7 @@ use lemi_core::bundle::Bundle;
 use lemi_core::camera::{Camera, View};
 use lemi_gpu::{
     BackendChoice, CullOptions, CulledGeometry, Frame, Gpu, GpuCulledScene, GpuGeometry, GpuScene,
-    ImpostorCell, ImpostorRenderer, RenderOptions, Renderer, UploadOptions,
+    ImpostorCell, ImpostorRenderer, RenderOptions, Renderer, TexelFilter, UploadOptions,
 };
 
 type Error = Box<dyn std::error::Error>;
@@ -64,6 +65,8 @@ struct Args {
     parts: bool,
     /// Print per face how much of the face image the quads cover (depth complexity in texels).
     stats: bool,
+    /// How the impostor quads take their colour from their texels.
+    texel_filter: TexelFilter,
 }
 
 fn parse_args() -> Result<Args, Error> {
@@ -79,6 +82,7 @@ fn parse_args() -> Result<Args, Error> {
         no_geometry: false,
         parts: false,
         stats: false,
+        texel_filter: TexelFilter::default(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -98,10 +102,18 @@ fn parse_args() -> Result<Args, Error> {
             "--no-geometry" => a.no_geometry = true,
             "--parts" => a.parts = true,
             "--stats" => a.stats = true,
+            "--texel-filter" => {
+                a.texel_filter = match value()?.as_str() {
+                    "nearest" => TexelFilter::Nearest,
+                    "footprint" => TexelFilter::Footprint,
+                    v => return Err(format!("--texel-filter {v}: nearest or footprint").into()),
+                }
+            }
             "-h" | "--help" => {
                 println!(
                     "frame_timing [BUNDLE] [--reps N] [--cells K] [--size WxH] [--fov DEG] \
-                     [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]"
+                     [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats] \
+                     [--texel-filter footprint|nearest]"
                 );
                 std::process::exit(0);
             }
@@ -301,7 +313,8 @@ fn main() -> Result<(), Error> {
         )?)
     };
     let materials = Arc::clone(&all.materials);
-    let impostors = ImpostorRenderer::new(&gpu)?;
+    let mut impostors = ImpostorRenderer::new(&gpu)?;
+    impostors.set_texel_filter(args.texel_filter);
     let reference = Renderer::new(&gpu)?;
     let options = RenderOptions::default();
     let dirs = [

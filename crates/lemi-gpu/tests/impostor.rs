@@ -12,7 +12,7 @@ use lemi_core::compress::MacroTexture;
 use lemi_core::{Face, Material, Mesh, Scene, SceneBuilder, Texture, Vertex};
 use lemi_gpu::{
     Frame, Gpu, GpuError, GpuMaterials, GpuScene, ImpostorCell, ImpostorCellData, ImpostorRenderer,
-    RenderOptions, Renderer, UploadOptions,
+    RenderOptions, Renderer, TexelFilter, UploadOptions,
 };
 use lemi_testkit::gpu;
 
@@ -196,6 +196,98 @@ fn quad_shows_its_texels_exactly() {
         .render_impostors_only(&cell, &camera().view(), &opts)
         .expect("render impostors only");
     assert_eq!(f, g);
+}
+
+/// A 1-texel black and white checkerboard with a transparent square hole, shown minified (4
+/// texels per pixel) and magnified (¼ texel per pixel). Minified, nearest sampling shows every
+/// pixel black or white (the skipped texels are what makes a far field shimmer as the viewer
+/// moves); the footprint filter shows the checkerboard's mean, mid grey in linear light. Both
+/// cover exactly the same pixels, and magnified they draw the same image bit for bit.
+#[test]
+fn minified_quads_filter_their_footprint_and_keep_coverage() {
+    let Some(gpu) = gpu() else { return };
+    let side = 128;
+    let mut m = filled(side, side, [0, 0, 0, 255]);
+    for y in 0..side {
+        for x in 0..side {
+            let hole = (40..88).contains(&x) && (40..88).contains(&y);
+            let white = (x + y) % 2 == 0;
+            let c = if white {
+                [255, 255, 255, 255]
+            } else {
+                [0, 0, 0, 255]
+            };
+            put(&mut m, x, y, if hole { [255, 0, 0, 0] } else { c });
+        }
+    }
+    // [-1, 1]² at distance 2: pixels 16 ..= 48, 32 px for 128 texels (4 texels a pixel).
+    let far = quad(
+        0,
+        0,
+        [0, 0, side, side],
+        [-1.0, 1.0, -1.0, 1.0, -2.0],
+        [0.0; 3],
+    );
+    let cell = quads_cell(&gpu, &[far], std::slice::from_ref(&m));
+    let mut r = ImpostorRenderer::new(&gpu).expect("renderer");
+    assert_eq!(r.texel_filter(), TexelFilter::Footprint, "the default");
+    let opts = RenderOptions::default();
+    let view = camera().view();
+    let filtered = r.render(&cell, &view, &opts).expect("render");
+    r.set_texel_filter(TexelFilter::Nearest);
+    let nearest = r.render(&cell, &view, &opts).expect("render");
+    // the same pixels covered, at the same depths
+    assert_eq!(
+        filtered.depth, nearest.depth,
+        "coverage and depth must not change"
+    );
+    assert!(
+        filtered.covered_count() > 32 * 32 - 12 * 12 - 2 * 32 * 2,
+        "{}",
+        filtered.covered_count()
+    );
+    // away from the quad's rim and the hole's, every pixel is the checkerboard's mean
+    // (½ in linear light: sRGB 188) when filtered, black or white when not
+    let (mut greys, mut extremes) = (0, 0);
+    for py in 18..46u32 {
+        for px in 18..46u32 {
+            let in_hole_zone = (24..41).contains(&px) && (24..41).contains(&py);
+            if in_hole_zone {
+                continue;
+            }
+            let f = filtered.pixel(px, py).expect("pixel");
+            let n = nearest.pixel(px, py).expect("pixel");
+            assert!(
+                f[..3].iter().all(|&c| (186..=190).contains(&c)),
+                "filtered pixel {px},{py} = {f:?}, expected mid grey"
+            );
+            greys += 1;
+            assert!(
+                n[..3] == [0, 0, 0] || n[..3] == [255, 255, 255],
+                "nearest pixel {px},{py} = {n:?}"
+            );
+            extremes += 1;
+        }
+    }
+    assert!(greys > 400 && extremes == greys, "{greys} {extremes}");
+    // next to the hole the mean is taken over opaque texels only: no red from the clear ones
+    for py in 16..48u32 {
+        for px in 16..48u32 {
+            if let Some(p) = filtered.pixel(px, py).filter(|p| p[3] == 255) {
+                assert!(
+                    p[0].abs_diff(p[1]) <= 1,
+                    "pixel {px},{py} = {p:?} shows a clear texel's colour"
+                );
+            }
+        }
+    }
+    // magnified: the footprint filter is nearest sampling, bit for bit
+    let near_quad = quad(0, 0, [0, 0, 16, 16], [-1.0, 1.0, -1.0, 1.0, -2.0], [0.0; 3]);
+    let cell = quads_cell(&gpu, &[near_quad], &[m]);
+    let nearest = r.render(&cell, &view, &opts).expect("render");
+    r.set_texel_filter(TexelFilter::Footprint);
+    let filtered = r.render(&cell, &view, &opts).expect("render");
+    assert!(filtered == nearest, "a magnified quad must not change");
 }
 
 /// A cell's macro-textures are packed at upload into atlas pages; a quad finds its texels there

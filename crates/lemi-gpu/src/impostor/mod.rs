@@ -79,5 +79,5 @@ mod test_support;
 mod upload;
 
 pub use layout::{ImpostorCellData, DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF, QUAD_GROWTH_TEXELS};
-pub use render::{Composite, ImpostorRenderer};
+pub use render::{Composite, ImpostorRenderer, TexelFilter};
 pub use upload::{ImpostorCell, PendingImpostorCell};

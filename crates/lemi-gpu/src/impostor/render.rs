@@ -39,6 +39,26 @@ pub struct Composite<'a> {
     pub window: Option<Window>,
 }
 
+/// How an impostor quad's pixels take their colour from its macro-texels. Coverage (the alpha test)
+/// is the same in both: the texel under the pixel's centre decides it, so filtering never opens a
+/// crack or grows a silhouette.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TexelFilter {
+    /// The texel under the pixel's centre, as the bake stored it. Where a quad is minified (more
+    /// than one texel per pixel: towards a cube face's edges, where a texel subtends down to a
+    /// third of its angle at the face's centre, or in a smaller view than the bake was made for)
+    /// nearest sampling skips texels, and the far field shimmers as the viewer moves.
+    Nearest,
+    /// The texel under the centre where a texel spans at least two pixels (magnified quads: bit
+    /// for bit [`TexelFilter::Nearest`]); elsewhere the mean of the opaque texels under an n×n
+    /// grid of points over the pixel's footprint (n = ⌈2 · texels per pixel⌉, at most 4: the
+    /// footprint sampled at twice the texel rate, averaged in linear light): a box filter of the
+    /// footprint, what a mip level would give without storing one, and exact at texel borders (no
+    /// texel of another micro-texture or of the transparent gap is ever fetched).
+    #[default]
+    Footprint,
+}
+
 /// Draws [`ImpostorCell`]s: the reference pipeline for near geometry, the quad pipelines (opaque
 /// and alpha-tested), globals and cached render targets.
 pub struct ImpostorRenderer {
@@ -57,6 +77,7 @@ pub struct ImpostorRenderer {
     max_dim: u32,
     targets: Mutex<Option<Targets>>,
     last_gpu: GpuTime,
+    texel_filter: TexelFilter,
 }
 
 impl ImpostorRenderer {
@@ -155,8 +176,19 @@ impl ImpostorRenderer {
                 max_dim: gpu.limits().max_texture_dimension_2d,
                 targets: Mutex::new(None),
                 last_gpu: GpuTime::default(),
+                texel_filter: TexelFilter::default(),
             }
         })
+    }
+
+    /// How quads take their colour from their texels from now on ([`TexelFilter::Footprint`] by
+    /// default).
+    pub fn set_texel_filter(&mut self, filter: TexelFilter) {
+        self.texel_filter = filter;
+    }
+
+    pub fn texel_filter(&self) -> TexelFilter {
+        self.texel_filter
     }
 
     /// Renders the cell from `view`: its near geometry (shaded exactly like [`crate::Renderer`],
@@ -252,6 +284,11 @@ impl ImpostorRenderer {
         }
         let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
         globals.params[1] = QUAD_ALPHA_CUTOFF;
+        // impostor.wgsl: z filters minified quads, w says the texels arrive sRGB-encoded (the
+        // Rgba8Unorm and block-format views that pass bytes through), so the mean is taken in
+        // linear light
+        globals.params[2] = f32::from(u8::from(self.texel_filter == TexelFilter::Footprint));
+        globals.params[3] = f32::from(u8::from(!self.macro_format.is_srgb()));
         let cells = &parts.cells;
         let window = match parts.window {
             Some(w) => {
