@@ -106,9 +106,9 @@ fn main() -> Result<()> {
         let tt = (p - c[0]).dot(et) / et.length_squared();
         let [x0, y0, x1, y1] = q.texels.map(f64::from);
         let (fx, fy) = (x0 + s * (x1 - x0), y0 + tt * (y1 - y0));
-        // within the quad or up to `around` texels beside it along the row
+        // within the quad or up to `around` texels beside it
         let margin = around as f64;
-        if !(fy >= y0 && fy < y1 && fx >= x0 - margin && fx < x1 + margin) {
+        if !(fy >= y0 - margin && fy < y1 + margin && fx >= x0 - margin && fx < x1 + margin) {
             continue;
         }
         hits.push((t, *q, fx, fy, p));
@@ -118,7 +118,7 @@ fn main() -> Result<()> {
     for (t, q, fx, fy, p) in hits {
         let layer = face_index(q.face).and_then(|fi| header.layers[fi].get(q.layer as usize));
         let [x0, y0, x1, y1] = q.texels.map(i64::from);
-        let inside = fx >= x0 as f64 && fx < x1 as f64;
+        let inside = fx >= x0 as f64 && fx < x1 as f64 && fy >= y0 as f64 && fy < y1 as f64;
         println!(
             "{} face {:?} layer {} (distance {:.3}, slab {:.3}..{}) at {t:.3} m, point {p:.3}; face texel ({fx:.3}, {fy:.3}) in quad texels [{x0}, {y0}, {x1}, {y1}]",
             if inside { "HIT " } else { "near" },
@@ -136,7 +136,7 @@ fn main() -> Result<()> {
             if x == x0 {
                 row.push('|');
             }
-            if x < x0 || x >= x1 {
+            if x < x0 || x >= x1 || tyi < y0 || tyi >= y1 {
                 row.push_str(" ---------- ");
             } else {
                 // face texel → macro texel (undo a rotation)
