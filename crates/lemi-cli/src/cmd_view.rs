@@ -11,7 +11,8 @@
 //!
 //! Controls: WASD move (shift: faster), drag with a mouse button or the arrow keys to look, Q/E
 //! down/up (flying), F fly/walk (walking keeps the eye height), G impostors/all geometry, L layer
-//! colouring, R start/stop recording, Esc quit. Every change of state is printed to stdout.
+//! colouring, T texel filter of minified quads (footprint/nearest), R start/stop recording, Esc
+//! quit. Every change of state is printed to stdout.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -24,7 +25,7 @@ use lemi_core::bundle::Manifest;
 use lemi_core::cell::CellId;
 use lemi_gpu::{
     BackendChoice, Frame, GpuMaterials, GpuScene, ImpostorRenderer, Presented, RenderOptions,
-    Renderer, UploadOptions, WindowSurface,
+    Renderer, TexelFilter, UploadOptions, WindowSurface,
 };
 use lemi_runtime::Streamer;
 use winit::application::ApplicationHandler;
@@ -251,7 +252,7 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!(
         "controls: WASD move (shift faster), drag or arrows look, Q/E down/up, F fly/walk, \
-         G impostors/geometry, L layer colours, R record, Esc quit"
+         G impostors/geometry, L layer colours, T texel filter, R record, Esc quit"
     );
     let run = event_loop.run_app(&mut app);
     // the recording is written whatever ended the loop
@@ -554,6 +555,22 @@ impl App {
                             "all geometry"
                         } else {
                             "impostors"
+                        }
+                    );
+                }
+            }
+            KeyCode::KeyT => {
+                if let Some(v) = self.viewer.as_mut() {
+                    let next = match v.impostor_renderer.texel_filter() {
+                        TexelFilter::Footprint => TexelFilter::Nearest,
+                        TexelFilter::Nearest => TexelFilter::Footprint,
+                    };
+                    v.impostor_renderer.set_texel_filter(next);
+                    println!(
+                        "texels    {}",
+                        match next {
+                            TexelFilter::Footprint => "filtered where minified (footprint)",
+                            TexelFilter::Nearest => "nearest, as baked",
                         }
                     );
                 }
