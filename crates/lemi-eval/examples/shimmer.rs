@@ -29,28 +29,14 @@
 //! Without `--eye`, the cell's centre and two opposite corners, each looking along every
 //! evaluated direction.
 
-use std::sync::Arc;
-
 use anyhow::{anyhow, bail, Context, Result};
 use glam::{DQuat, DVec3};
-use lemi_core::cell::{eval_directions, eval_viewpoints, CellId};
+use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, EvalOptions};
-use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
-    RenderOptions, Renderer, TexelFilter, UploadOptions,
-};
+use lemi_gpu::{BackendChoice, Frame, Gpu, RenderOptions, TexelFilter};
 
-fn vec3(s: &str) -> Result<DVec3> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("`{s}` is not x,y,z"))?;
-    match v[..] {
-        [x, y, z] => Ok(DVec3::new(x, y, z)),
-        _ => bail!("`{s}` is not x,y,z"),
-    }
-}
+mod common;
+use common::{vec3, CellRenderers};
 
 fn to_linear(c: u8) -> f64 {
     let c = c as f64 / 255.0;
@@ -105,10 +91,7 @@ fn downsampled_lumas(f: &Frame, k: u32) -> Vec<f64> {
 }
 
 struct Setup {
-    full: GpuScene,
-    reference: Renderer,
-    impostors: ImpostorRenderer,
-    cell: ImpostorCell,
+    r: CellRenderers,
     fov_x: f64,
     size: (u32, u32),
     k: u32,
@@ -168,16 +151,17 @@ impl Setup {
             let view = camera(eye, d, self.fov_x, w, h)?.view();
             let big = camera(eye, d, self.fov_x, w * self.k, h * self.k)?.view();
             let reference =
-                downsampled_lumas(&self.reference.render(&self.full, &big, &opts)?, self.k);
-            self.impostors.set_texel_filter(TexelFilter::Nearest);
-            let nearest = self.impostors.render(&self.cell, &view, &opts)?;
+                downsampled_lumas(&self.r.reference.render(&self.r.full, &big, &opts)?, self.k);
+            self.r.impostors.set_texel_filter(TexelFilter::Nearest);
+            let nearest = self.r.impostors.render(&self.r.cell, &view, &opts)?;
             let quads = self
+                .r
                 .impostors
-                .render_impostors_only(&self.cell, &view, &opts)?;
-            self.impostors.set_texel_filter(TexelFilter::Footprint);
-            let footprint = self.impostors.render(&self.cell, &view, &opts)?;
+                .render_impostors_only(&self.r.cell, &view, &opts)?;
+            self.r.impostors.set_texel_filter(TexelFilter::Footprint);
+            let footprint = self.r.impostors.render(&self.r.cell, &view, &opts)?;
             let (n, f) = (lumas(&nearest), lumas(&footprint));
-            let geometry = lumas(&self.reference.render(&self.full, &view, &opts)?);
+            let geometry = lumas(&self.r.reference.render(&self.r.full, &view, &opts)?);
             for i in 0..n_px {
                 // a quad is the visible surface: the quads-only frame has the full frame's depth
                 let (a, b) = (nearest.depth[i], quads.depth[i]);
@@ -244,39 +228,16 @@ fn main() -> Result<()> {
     let (bundle, scene) = (opened.bundle, opened.scene);
     let id: CellId = args[1].parse().map_err(|e| anyhow!("{e}"))?;
     let gpu = Gpu::new(BackendChoice::Auto)?;
-    let manifest = bundle.manifest();
-    let (w, h, fov_x) = output_view(manifest, &eval);
-    let cell_box = manifest.grid.cell_of(id).map_err(|e| anyhow!("{e}"))?;
-    let materials = Arc::new(GpuMaterials::upload(
-        &gpu,
-        &scene.materials,
-        &scene.textures,
-    )?);
-    let file = bundle.cell(id)?;
+    let (w, h, fov_x) = output_view(bundle.manifest(), &eval);
     let mut setup = Setup {
-        full: GpuScene::upload(&gpu, &scene, &UploadOptions::default())?,
-        reference: Renderer::new(&gpu)?,
-        impostors: ImpostorRenderer::new(&gpu)?,
-        cell: ImpostorCell::upload_file(&gpu, materials, &scene, &file)?,
+        r: CellRenderers::new(&gpu, &scene, &bundle, id)?,
         fov_x,
         size: (w, h),
         k,
     };
-    let views: Vec<(String, DVec3, DVec3)> = match (eye, dir) {
-        (Some(e), Some(d)) => vec![("given".into(), e, d)],
-        (None, None) => {
-            let mut v = Vec::new();
-            for (l, e) in eval_viewpoints(&cell_box, 0, 1) {
-                if l == "centre" || l == "corner 0" || l == "corner 7" {
-                    for (dl, d) in eval_directions(&manifest.params.faces) {
-                        v.push((format!("{l}, looking {dl}"), e, d));
-                    }
-                }
-            }
-            v
-        }
-        _ => bail!("give both --eye and --dir, or neither"),
-    };
+    let views = common::views((eye, dir), &bundle, id, |l| {
+        l == "centre" || l == "corner 0" || l == "corner 7"
+    })?;
     println!(
         "{} views at {w}x{h}, {fov_x}° wide, {frames} frames turning {step_px} px a frame, reference at {k}x{k} samples",
         views.len()

@@ -11,34 +11,18 @@
 //! direction, and the five worst views by the 1× p99 are printed.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::DVec3;
-use lemi_core::cell::{eval_directions, eval_viewpoints, CellId};
+use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, silhouettes, EvalOptions};
-use lemi_gpu::{
-    BackendChoice, Frame, Gpu, GpuMaterials, GpuScene, ImpostorCell, ImpostorRenderer,
-    RenderOptions, Renderer, UploadOptions,
-};
+use lemi_gpu::{BackendChoice, Frame, Gpu, RenderOptions};
 
-fn vec3(s: &str) -> Result<DVec3> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("`{s}` is not x,y,z"))?;
-    match v[..] {
-        [x, y, z] => Ok(DVec3::new(x, y, z)),
-        _ => bail!("`{s}` is not x,y,z"),
-    }
-}
+mod common;
+use common::{vec3, CellRenderers};
 
 struct Probe {
-    full: GpuScene,
-    reference: Renderer,
-    impostors: ImpostorRenderer,
-    cell: ImpostorCell,
+    r: CellRenderers,
     fov_x: f64,
     size: (u32, u32),
 }
@@ -53,8 +37,8 @@ impl Probe {
         let view = camera(eye, dir, self.fov_x, self.size.0 * k, self.size.1 * k)?.view();
         let options = RenderOptions::default();
         Ok(Views {
-            reference: self.reference.render(&self.full, &view, &options)?,
-            impostor: self.impostors.render(&self.cell, &view, &options)?,
+            reference: self.r.reference.render(&self.r.full, &view, &options)?,
+            impostor: self.r.impostors.render(&self.r.cell, &view, &options)?,
         })
     }
 }
@@ -117,38 +101,15 @@ fn main() -> Result<()> {
     let (bundle, scene) = (opened.bundle, opened.scene);
     let id: CellId = args[1].parse().map_err(|e| anyhow!("{e}"))?;
     let gpu = Gpu::new(BackendChoice::Auto)?;
-    let manifest = bundle.manifest();
-    let (w, h, fov_x) = output_view(manifest, &EvalOptions::default());
-    let cell_box = manifest.grid.cell_of(id).map_err(|e| anyhow!("{e}"))?;
-    let materials = Arc::new(GpuMaterials::upload(
-        &gpu,
-        &scene.materials,
-        &scene.textures,
-    )?);
-    let file = bundle.cell(id)?;
+    let (w, h, fov_x) = output_view(bundle.manifest(), &EvalOptions::default());
     let probe = Probe {
-        full: GpuScene::upload(&gpu, &scene, &UploadOptions::default())?,
-        reference: Renderer::new(&gpu)?,
-        impostors: ImpostorRenderer::new(&gpu)?,
-        cell: ImpostorCell::upload_file(&gpu, materials, &scene, &file)?,
+        r: CellRenderers::new(&gpu, &scene, &bundle, id)?,
         fov_x,
         size: (w, h),
     };
-    let views: Vec<(String, DVec3, DVec3)> = match (eye, dir) {
-        (Some(e), Some(d)) => vec![("given".into(), e, d)],
-        (None, None) => {
-            let mut v = Vec::new();
-            for (l, e) in eval_viewpoints(&cell_box, 0, 1) {
-                if l == "centre" || l.starts_with("corner") {
-                    for (dl, d) in eval_directions(&manifest.params.faces) {
-                        v.push((format!("{l}, looking {dl}"), e, d));
-                    }
-                }
-            }
-            v
-        }
-        _ => bail!("give both --eye and --dir, or neither"),
-    };
+    let views = common::views((eye, dir), &bundle, id, |l| {
+        l == "centre" || l.starts_with("corner")
+    })?;
     let mut rows = Vec::new();
     for (label, e, d) in &views {
         let one = probe.render(*e, *d, 1)?;

@@ -18,17 +18,8 @@ use glam::DVec3;
 use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, EvalOptions};
 
-fn vec3(s: &str) -> Result<DVec3> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| format!("`{s}` is not x,y,z"))?;
-    match v[..] {
-        [x, y, z] => Ok(DVec3::new(x, y, z)),
-        _ => bail!("`{s}` is not x,y,z"),
-    }
-}
+mod common;
+use common::vec3;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
