@@ -85,6 +85,17 @@ fn render_rejects_absurd_flags() {
         &lemi(&["render", "builtin:city:20k", "--fov", "200", "-o", o]),
         "fov",
     );
+    assert_clean_error(
+        &lemi(&[
+            "render",
+            "builtin:city:20k",
+            "--texel-filter",
+            "bilinear",
+            "-o",
+            o,
+        ]),
+        "--texel-filter",
+    );
     assert!(!out.exists(), "nothing written on error");
 }
 

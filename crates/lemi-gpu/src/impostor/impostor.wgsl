@@ -8,7 +8,7 @@
 // bits of the f32 linear view depth.
 //
 // The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle); the sampler
-// binding stays in the layout for filtering modes to come. Where a texel spans less than two
+// binding stays in the layout, unused (a sampler's filtering would mix micro-textures). Where a texel spans less than two
 // pixels and globals.params.z is 1, the colour is the mean of an n×n grid of such fetches over the
 // pixel's footprint (n = ⌈2 · texels per pixel⌉, at most 4: the footprint sampled at twice the
 // texel rate; opaque texels only, averaged in linear light: globals.params.w is 1 where the texels
