@@ -41,6 +41,13 @@ pub struct Enclosure {
 pub struct Room {
     /// Where a viewer in the room may stand (inside the room, off its walls).
     pub walkable: Aabb,
+    /// The room's inside: the box its walls', floor's and ceiling's inner faces bound. Every
+    /// surface seen from the room other than through one of its holes touches it (its walls,
+    /// floor and ceiling, the reveals of its holes, anything standing in it), and each of its
+    /// doorways leads straight into the other room's inside. `None` when not known: then every
+    /// surface of the building counts as seen from the room directly (no culling between rooms).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inside: Option<Aabb>,
     /// Every opening from the room to the outside, as its four corners in order around it, on
     /// one face of the wall (a ray through the hole passes through both faces' rectangles).
     pub openings: Vec<[DVec3; 4]>,
@@ -88,6 +95,13 @@ impl Enclosure {
                     "room {k} is empty, not finite or not inside the building's bounds"
                 ));
             }
+            if let Some(i) = &r.inside {
+                if !finite_box(i) || !i.contains(w.min) || !i.contains(w.max) {
+                    return Err(format!(
+                        "the inside of room {k} is empty, not finite or does not hold its walkable box"
+                    ));
+                }
+            }
             if r.openings.iter().flatten().any(|p| !p.is_finite()) {
                 return Err(format!(
                     "room {k} has an opening with a corner that is not finite"
@@ -122,6 +136,12 @@ impl Enclosure {
     /// doorway's projection, and so on), as one rectangle: `None` when no opening can be seen
     /// (then nothing outside is visible) or when the eye is in no room.
     pub fn window(&self, view: &View) -> Option<Window> {
+        self.sight(view).and_then(|s| s.outside)
+    }
+
+    /// What an eye in one of the rooms can see, room by room (see [`Sight`]): `None` when the
+    /// eye is in no room.
+    pub fn sight(&self, view: &View) -> Option<Sight> {
         let eye = view.view.inverse().transform_point3(DVec3::ZERO);
         let room = self.room_of(eye)?;
         let view_proj = view.view_proj();
@@ -145,13 +165,16 @@ impl Enclosure {
                 hi: r.hi + DVec2::splat(WINDOW_MARGIN_PX),
             })
         };
+        let join = |a: &mut Option<Rect>, b: Rect| *a = Some(a.map_or(b, |a| a.join(&b)));
         // depth-first over the rooms, never back into a room on the path
-        let mut union: Option<Rect> = None;
+        let mut outside: Option<Rect> = None;
+        let mut rooms: Vec<Option<Rect>> = vec![None; self.rooms.len()];
+        rooms[room] = Some(screen);
         let mut stack = vec![(room, screen, 1u64 << room.min(63))];
         while let Some((r, clip, path)) = stack.pop() {
             for o in &self.rooms[r].openings {
                 if let Some(seen) = project(o).and_then(|p| p.meet(&clip)) {
-                    union = Some(union.map_or(seen, |u| u.join(&seen)));
+                    join(&mut outside, seen);
                 }
             }
             for d in &self.doorways {
@@ -164,37 +187,81 @@ impl Enclosure {
                     continue;
                 }
                 if let Some(seen) = project(&d.corners).and_then(|p| p.meet(&clip)) {
+                    join(&mut rooms[next], seen);
                     stack.push((next, seen, path | 1 << next));
                 }
             }
         }
-        let Rect { lo, hi } = union?;
-        let x0 = lo.x.floor().clamp(0.0, w);
-        let y0 = lo.y.floor().clamp(0.0, h);
-        let x1 = hi.x.ceil().clamp(0.0, w);
-        let y1 = hi.y.ceil().clamp(0.0, h);
-        if x0 >= x1 || y0 >= y1 {
-            return None;
-        }
-        // NDC of the rectangle (y up), then the map of [a0, a1] onto [-1, 1] on both axes
-        let a = view.pixel_to_ndc(DVec2::new(x0, y1));
-        let b = view.pixel_to_ndc(DVec2::new(x1, y0));
-        let (sx, sy) = (2.0 / (b.x - a.x), 2.0 / (b.y - a.y));
-        let crop = DMat4::from_cols(
-            DVec4::new(sx, 0.0, 0.0, 0.0),
-            DVec4::new(0.0, sy, 0.0, 0.0),
-            DVec4::new(0.0, 0.0, 1.0, 0.0),
-            DVec4::new(-(a.x + b.x) * 0.5 * sx, -(a.y + b.y) * 0.5 * sy, 0.0, 1.0),
-        );
-        Some(Window {
-            rect: [x0 as u32, y0 as u32, x1 as u32, y1 as u32],
-            view_proj: crop * view_proj,
+        Some(Sight {
+            view: *view,
+            room,
+            rooms,
+            outside: outside.and_then(|r| window_of(view, r)),
         })
     }
 }
 
+/// What an eye in a room of an [`Enclosure`] can see ([`Enclosure::sight`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sight {
+    view: View,
+    /// The room the eye stands in.
+    pub room: usize,
+    /// Per room, the part of the view (in pixels, before rounding) through which it can be seen:
+    /// the whole view for the eye's room, the projections of the doorways leading to it for the
+    /// others (each cut to the doorways before it), `None` for a room out of sight.
+    rooms: Vec<Option<Rect>>,
+    /// The part of the view through which the outside can be seen ([`Enclosure::window`]).
+    pub outside: Option<Window>,
+}
+
+impl Sight {
+    /// Whether the eye's room is among `rooms` (indices into [`Enclosure::rooms`]).
+    pub fn sees_directly(&self, mut rooms: impl Iterator<Item = usize>) -> bool {
+        rooms.any(|r| r == self.room)
+    }
+
+    /// The smallest window holding every pixel through which one of `rooms` can be seen: `None`
+    /// when none of them can. Anything touching only those rooms' insides is seen in it alone.
+    pub fn window(&self, rooms: impl Iterator<Item = usize>) -> Option<Window> {
+        let mut union: Option<Rect> = None;
+        for r in rooms.filter_map(|r| self.rooms.get(r).copied().flatten()) {
+            union = Some(union.map_or(r, |u| u.join(&r)));
+        }
+        window_of(&self.view, union?)
+    }
+}
+
+/// The whole pixels of `view` holding `r`, with the clip-space matrix of their sub-frustum:
+/// `None` when no pixel is left.
+fn window_of(view: &View, r: Rect) -> Option<Window> {
+    let (w, h) = (view.width as f64, view.height as f64);
+    let Rect { lo, hi } = r;
+    let x0 = lo.x.floor().clamp(0.0, w);
+    let y0 = lo.y.floor().clamp(0.0, h);
+    let x1 = hi.x.ceil().clamp(0.0, w);
+    let y1 = hi.y.ceil().clamp(0.0, h);
+    if x0 >= x1 || y0 >= y1 {
+        return None;
+    }
+    // NDC of the rectangle (y up), then the map of [a0, a1] onto [-1, 1] on both axes
+    let a = view.pixel_to_ndc(DVec2::new(x0, y1));
+    let b = view.pixel_to_ndc(DVec2::new(x1, y0));
+    let (sx, sy) = (2.0 / (b.x - a.x), 2.0 / (b.y - a.y));
+    let crop = DMat4::from_cols(
+        DVec4::new(sx, 0.0, 0.0, 0.0),
+        DVec4::new(0.0, sy, 0.0, 0.0),
+        DVec4::new(0.0, 0.0, 1.0, 0.0),
+        DVec4::new(-(a.x + b.x) * 0.5 * sx, -(a.y + b.y) * 0.5 * sy, 0.0, 1.0),
+    );
+    Some(Window {
+        rect: [x0 as u32, y0 as u32, x1 as u32, y1 as u32],
+        view_proj: crop * view.view_proj(),
+    })
+}
+
 /// A pixel rectangle `[lo, hi]` (x right, y down).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Rect {
     lo: DVec2,
     hi: DVec2,
@@ -272,10 +339,15 @@ mod tests {
             rooms: vec![
                 Room {
                     walkable: Aabb::new(DVec3::new(0.3, 0.3, 0.3), DVec3::new(9.7, 2.7, 7.7)),
+                    inside: Some(Aabb::new(DVec3::ZERO, DVec3::new(10.0, 3.0, 8.0))),
                     openings: vec![rect(2.0, 3.0, 0.0, 2.2, -0.2, -0.2)],
                 },
                 Room {
                     walkable: Aabb::new(DVec3::new(10.5, 0.3, 0.3), DVec3::new(19.9, 2.7, 7.7)),
+                    inside: Some(Aabb::new(
+                        DVec3::new(10.2, 0.0, 0.0),
+                        DVec3::new(20.2, 3.0, 8.0),
+                    )),
                     openings: vec![rect(20.4, 20.4, 1.0, 2.4, 3.0, 4.2)],
                 },
             ],
@@ -360,6 +432,48 @@ mod tests {
             ..enclosure()
         };
         assert!(bad.validate().unwrap_err().contains("doorway 0"));
+        let mut bad = enclosure();
+        bad.rooms[1].inside = Some(Aabb::new(DVec3::splat(11.0), DVec3::splat(12.0)));
+        assert!(bad.validate().unwrap_err().contains("inside of room 1"));
+    }
+
+    #[test]
+    fn the_eyes_room_is_seen_whole_and_the_next_only_through_the_doorway() {
+        let e = enclosure();
+        // in A, looking at the doorway to B
+        let v = view(DVec3::new(4.0, 1.7, 5.5), DVec3::X, 60.0);
+        let s = e.sight(&v).expect("in a room");
+        assert_eq!(s.room, 0);
+        assert!(s.sees_directly([0, 1].into_iter()));
+        assert!(!s.sees_directly([1].into_iter()));
+        assert_eq!(
+            s.window([0].into_iter()).map(|w| w.rect),
+            Some([0, 0, 320, 200])
+        );
+        let [x0, y0, x1, y1] = s
+            .window([1].into_iter())
+            .expect("B through the doorway")
+            .rect;
+        assert!(
+            x1 - x0 < 60 && y1 - y0 < 120 && x0 > 100,
+            "{:?}",
+            [x0, y0, x1, y1]
+        );
+        assert_eq!(
+            s.window([0, 1].into_iter()).map(|w| w.rect),
+            Some([0, 0, 320, 200])
+        );
+        assert_eq!(s.window(std::iter::empty()), None);
+        assert_eq!(s.outside, e.window(&v));
+        // looking at A's +Z wall: B is out of sight
+        let s = e
+            .sight(&view(DVec3::new(4.0, 1.7, 5.5), DVec3::Z, 60.0))
+            .expect("in A");
+        assert_eq!(s.window([1].into_iter()), None);
+        // outside every room: no sight
+        assert!(e
+            .sight(&view(DVec3::new(30.0, 1.7, 4.0), DVec3::X, 60.0))
+            .is_none());
     }
 
     proptest! {
@@ -401,6 +515,47 @@ mod tests {
             let [x0, y0, x1, y1] = w.rect;
             prop_assert!(px >= x0 as f64 && px <= x1 as f64 && py >= y0 as f64 && py <= y1 as f64,
                 "pixel ({px}, {py}) outside the window {:?}", w.rect);
+            let r = DVec3::splat(1e-3);
+            prop_assert!(!crate::frustum::box_outside(p - r, p + r, &w.view_proj));
+        }
+
+        /// Every point of the other room's inside that an eye sees through the doorway (the ray
+        /// passing the hole in both faces of the wall) projects into that room's window, and a
+        /// box around it is not culled by the window's frustum.
+        #[test]
+        fn what_is_seen_of_the_next_room_lies_in_its_window(
+            in_b in any::<bool>(), ex in 0.0f64..1.0, ey in 0.3f64..2.7, ez in 0.3f64..7.7,
+            yaw in 0.0f64..std::f64::consts::TAU, pitch in -1.2f64..1.2,
+            fov in 20.0f64..120.0,
+            px in 0.0f64..1.0, py in 0.0f64..1.0, pz in 0.0f64..1.0,
+        ) {
+            let e = enclosure();
+            let ex = if in_b { 10.5 + 9.4 * ex } else { 0.3 + 9.4 * ex };
+            let eye = DVec3::new(ex, ey, ez);
+            let dir = DVec3::new(yaw.cos() * pitch.cos(), pitch.sin(), yaw.sin() * pitch.cos());
+            let view = view(eye, dir, fov);
+            let other = usize::from(!in_b);
+            let inside = e.rooms[other].inside.expect("inside");
+            let p = inside.min + (inside.max - inside.min) * DVec3::new(px, py, pz);
+            let through = |x: f64| cross_x(eye, p, x)
+                .is_some_and(|c| (5.0..=6.0).contains(&c.z) && c.y <= 2.2);
+            if !(through(10.0) && through(10.2)) {
+                return Ok(());
+            }
+            let Some(pr) = view.project(p) else { return Ok(()) };
+            let (x, y) = (pr.pixel.x, pr.pixel.y);
+            if !(0.0..view.width as f64).contains(&x) || !(0.0..view.height as f64).contains(&y)
+                || pr.view_depth < 0.2 {
+                return Ok(());
+            }
+            let s = e.sight(&view).expect("in a room");
+            prop_assert_eq!(s.room, 1 - other);
+            let w = s.window([other].into_iter());
+            prop_assert!(w.is_some(), "a visible point of the other room but no window");
+            let w = w.unwrap();
+            let [x0, y0, x1, y1] = w.rect;
+            prop_assert!(x >= x0 as f64 && x <= x1 as f64 && y >= y0 as f64 && y <= y1 as f64,
+                "pixel ({x}, {y}) outside the window {:?}", w.rect);
             let r = DVec3::splat(1e-3);
             prop_assert!(!crate::frustum::box_outside(p - r, p + r, &w.view_proj));
         }

@@ -433,3 +433,111 @@ fn the_building_shares_the_city_facade_texture() {
     assert!(distinct.len() > 20, "flat floor texture");
     assert_eq!(s.textures.len(), 5, "city's four and the floor boards");
 }
+
+/// Each room's `inside` in the enclosure is what the strategy culls rooms by: from the centre and
+/// the corners of every room's walkable box, the first surface a ray meets before it leaves the
+/// room's inside box touches that box, and a ray that leaves the box first leaves it through one
+/// of the room's holes (an opening or a doorway).
+#[test]
+fn what_a_room_sees_directly_touches_its_inside() {
+    let l = layout();
+    let e = l.enclosure();
+    assert!(e.validate().is_ok());
+    let tris = triangles(scene(), true);
+    let n = 600;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let dirs: Vec<DVec3> = (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            let a = golden * i as f64;
+            DVec3::new(r * a.cos(), y, r * a.sin())
+        })
+        .collect();
+    let tol = 1e-4;
+    let touches = |t: &[Vec3; 3], b: &lemi_core::Aabb| {
+        let lo = t[0].min(t[1]).min(t[2]).as_dvec3();
+        let hi = t[0].max(t[1]).max(t[2]).as_dvec3();
+        (lo - b.max).max_element() <= tol && (b.min - hi).max_element() <= tol
+    };
+    // the holes of a room as (centre, across-axis, half width along the wall, half height)
+    let holes = |k: usize| -> Vec<(DVec3, usize, f64, f64)> {
+        let mut h: Vec<_> = l
+            .portals
+            .iter()
+            .filter(|p| p.room == k)
+            .map(|p| (v3(p.center), v3(p.outward), p.width, p.height))
+            .collect();
+        h.extend(
+            l.doorways
+                .iter()
+                .filter(|d| d.rooms.contains(&k))
+                .map(|d| (v3(d.center), v3(d.across), d.width, d.height)),
+        );
+        h.into_iter()
+            .map(|(c, n, w, ht)| {
+                let axis = if n.x.abs() > 0.5 { 0 } else { 2 };
+                (c.as_dvec3(), axis, 0.5 * w as f64, 0.5 * ht as f64)
+            })
+            .collect()
+    };
+    let (mut direct, mut through) = (0, 0);
+    for (k, room) in e.rooms.iter().enumerate() {
+        let inside = room.inside.expect("builtin rooms know their inside");
+        let (lo, hi) = (room.walkable.min, room.walkable.max);
+        let mut eyes = vec![0.5 * (lo + hi)];
+        for c in 0..8 {
+            eyes.push(DVec3::new(
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            ));
+        }
+        for &o in &eyes {
+            for &d in &dirs {
+                // where the ray leaves the inside box, and through which face
+                let (t_exit, axis) = (0..3)
+                    .filter(|&a| d[a] != 0.0)
+                    .map(|a| {
+                        let face = if d[a] > 0.0 {
+                            inside.max[a]
+                        } else {
+                            inside.min[a]
+                        };
+                        ((face - o[a]) / d[a], a)
+                    })
+                    .min_by(|x, y| x.0.total_cmp(&y.0))
+                    .expect("a direction");
+                let first = tris
+                    .iter()
+                    .filter_map(|t| ray_hit(o, d, t).filter(|&s| s > 1e-6).map(|s| (s, t)))
+                    .min_by(|x, y| x.0.total_cmp(&y.0));
+                if let Some((s, t)) = first.filter(|(s, _)| *s <= t_exit + tol) {
+                    assert!(
+                        touches(t, &inside),
+                        "room {k}: from {o} along {d} the first surface, at {s}, does not touch \
+                         its inside {inside:?}"
+                    );
+                    direct += 1;
+                    continue;
+                }
+                let q = o + d * t_exit;
+                let hole = holes(k).into_iter().any(|(c, across, hw, hh)| {
+                    let along = 2 - across;
+                    across == axis
+                        && (q[along] - c[along]).abs() <= hw + tol
+                        && (q.y - c.y).abs() <= hh + tol
+                });
+                assert!(
+                    hole,
+                    "room {k}: the ray from {o} along {d} leaves the inside at {q} not through a hole"
+                );
+                through += 1;
+            }
+        }
+    }
+    assert!(
+        direct > 0 && through > 0,
+        "{direct} direct, {through} through holes"
+    );
+}

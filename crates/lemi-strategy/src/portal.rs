@@ -23,6 +23,16 @@
 //! enclosure (openings given one by one, which may not be all of them) the outside is culled to
 //! the whole view.
 //!
+//! **Only through the doorways.** Where the enclosure's rooms know their insides
+//! ([`lemi_core::enclosure::Room::inside`]), the building's triangles are split by the rooms
+//! whose inside they touch (walls, floor, ceiling, reveals); those touching none (outer faces,
+//! roof) count as outside. From an eye in a room, the triangles of its own room are drawn over
+//! the whole view, those of another room only through the doorways leading to it
+//! ([`lemi_core::enclosure::Sight::window`], culled to its sub-frustum and scissored to it), and
+//! a room out of sight not at all, as cell-and-portal renderers draw buildings (Luebke & Georges
+//! 1995): on a software rasterizer the other rooms' walls behind the eye's room's cost as much
+//! as visible ones.
+//!
 //! Why this shows every surface within the impostors' bound: a portal's object is everything
 //! wholly inside its frustum beyond its near distance ([`Portal::select`]), and that frustum holds
 //! every point any viewpoint of its cell sees through the opening, so from inside the cell every
@@ -57,12 +67,26 @@ struct PortalPart {
     cell: ImpostorCell,
 }
 
+/// Where a class's triangles lie with respect to the enclosure, which says from where they
+/// can be seen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+enum Place {
+    /// Touching the insides of these rooms (bit `r`: room `r`), seen from another room only
+    /// through the doorways leading to them.
+    Rooms(u64),
+    /// In the building as far as known (no enclosure, or one whose rooms do not know their
+    /// insides): drawn over the whole view.
+    Building,
+    /// Not wholly inside the enclosure's bounds, or inside but touching no room's inside (the
+    /// building's outer faces, its roof): seen from its rooms only through its openings.
+    Outside,
+}
+
 /// Triangles of one signature, culled per frame.
 struct Class {
     /// Bit `k`: portal `k`'s object holds these triangles.
     mask: u64,
-    /// Not wholly inside the enclosure's bounds: seen from its rooms only through its openings.
-    outside: bool,
+    place: Place,
     geometry: CulledGeometry,
 }
 
@@ -147,26 +171,23 @@ impl PortalStrategy {
                         .iter()
                         .all(|p| p.setup.enclosure.as_ref() == Some(e))
             });
-        let mut by_mask: HashMap<(u64, bool), Vec<TriRef>> = HashMap::new();
+        let mut by_mask: HashMap<(u64, Place), Vec<TriRef>> = HashMap::new();
         for (m, tris) in signature.iter().enumerate() {
             for (t, &mask) in tris.iter().enumerate() {
-                let outside = enclosure.as_ref().is_some_and(|e| {
-                    scene.meshes[m]
-                        .triangle(t)
-                        .iter()
-                        .any(|v| !e.bounds.contains(v.as_dvec3()))
-                });
-                by_mask.entry((mask, outside)).or_default().push(TriRef {
+                let place = enclosure
+                    .as_ref()
+                    .map_or(Place::Building, |e| place(e, &scene.meshes[m].triangle(t)));
+                by_mask.entry((mask, place)).or_default().push(TriRef {
                     mesh: m as u32,
                     tri: t as u32,
                 });
             }
         }
-        let mut keys: Vec<(u64, bool)> = by_mask.keys().copied().collect();
+        let mut keys: Vec<(u64, Place)> = by_mask.keys().copied().collect();
         keys.sort_unstable();
         let mut classes = Vec::with_capacity(keys.len());
-        for (mask, outside) in keys {
-            let tris = &by_mask[&(mask, outside)];
+        for (mask, place) in keys {
+            let tris = &by_mask[&(mask, place)];
             let meshes = scene
                 .extract(tris)
                 .map_err(|e| StrategyError::Invalid(e.to_string()))?;
@@ -176,7 +197,7 @@ impl PortalStrategy {
             };
             classes.push(Class {
                 mask,
-                outside,
+                place,
                 geometry: CulledGeometry::upload(gpu, &part, &CullOptions::default())?,
             });
         }
@@ -239,31 +260,52 @@ impl Strategy for PortalStrategy {
     fn frame(&mut self, r: &FrameRequest<'_>) -> Result<StrategyFrame, StrategyError> {
         let active = self.active(r.eye);
         let view_proj = r.view.view_proj();
-        // from a room of the building, the outside shows only through its openings: `Some(None)`
-        // when none is in view
-        let window = self
+        // from a room of the building: the other rooms show only through the doorways, the
+        // outside only through the openings (`window` is `Some(None)` when none is in view)
+        let sight = self
             .enclosure
             .as_ref()
             .filter(|e| e.encloses(r.eye))
-            .map(|e| e.window(r.view));
+            .and_then(|e| e.sight(r.view));
+        let window = sight.as_ref().map(|s| s.outside);
         let mut parts = Composite::default();
         let mut near_triangles = 0;
         for class in self.classes.iter().filter(|c| c.mask & active == 0) {
-            let (list, windowed) = match (class.outside, &window) {
-                (true, Some(None)) => continue,
-                (true, Some(Some(w))) => (class.geometry.cull(&w.view_proj), true),
-                _ => (class.geometry.cull(&view_proj), false),
+            // the window the class is drawn in: `None` for the whole view
+            let seen_in = match (class.place, &sight) {
+                (_, None) | (Place::Building, _) => None,
+                (Place::Outside, Some(s)) => match s.outside {
+                    Some(w) => Some(w),
+                    None => continue,
+                },
+                (Place::Rooms(bits), Some(s)) => {
+                    let rooms = (0..64).filter(move |r| bits & (1 << r) != 0);
+                    if s.sees_directly(rooms.clone()) {
+                        None
+                    } else {
+                        match s.window(rooms) {
+                            Some(w) => Some(w),
+                            None => continue,
+                        }
+                    }
+                }
             };
+            let list = class
+                .geometry
+                .cull(seen_in.as_ref().map_or(&view_proj, |w| &w.view_proj));
             near_triangles += list.triangles;
             let chunks = class.geometry.chunks();
             let ranges = list
                 .draws
                 .iter()
                 .filter_map(|d| chunks.get(d.chunk).map(|c| (c, d.indices.clone())));
-            if windowed {
-                parts.windowed.extend(ranges);
-            } else {
-                parts.geometry.extend(ranges);
+            match seen_in {
+                None => parts.geometry.extend(ranges),
+                Some(_) if class.place == Place::Outside => parts.windowed.extend(ranges),
+                Some(w) => match parts.scissored.iter_mut().find(|(s, _)| s.rect == w.rect) {
+                    Some((_, group)) => group.extend(ranges),
+                    None => parts.scissored.push((w, ranges.collect())),
+                },
             }
         }
         parts.window = window.flatten();
@@ -309,6 +351,36 @@ impl Strategy for PortalStrategy {
             peak_bytes: self.texture_bytes,
             texture_bytes_per_cell: self.texture_bytes as f64 / self.portals.len().max(1) as f64,
         }
+    }
+}
+
+/// Where a triangle of the scene lies with respect to the building `e` (see [`Place`]).
+fn place(e: &Enclosure, tri: &[glam::Vec3; 3]) -> Place {
+    let [a, b, c] = tri.map(|v| v.as_dvec3());
+    if [a, b, c].iter().any(|&v| !e.bounds.contains(v)) {
+        return Place::Outside;
+    }
+    if e.rooms.len() > 64 || e.rooms.iter().any(|r| r.inside.is_none()) {
+        return Place::Building;
+    }
+    // touching a room's inside: the triangle's box meets it, within a rounding margin of the
+    // building's size (f32 vertices on the inside's faces)
+    let tol = 1e-5 * (e.bounds.max - e.bounds.min).length();
+    let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+    let bits = e
+        .rooms
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| {
+            r.inside.as_ref().is_some_and(|i| {
+                (lo - i.max).max_element() <= tol && (i.min - hi).max_element() <= tol
+            })
+        })
+        .fold(0u64, |m, (k, _)| m | 1 << k);
+    if bits == 0 {
+        Place::Outside
+    } else {
+        Place::Rooms(bits)
     }
 }
 

@@ -10,6 +10,9 @@
 //! - outside every shaft (in the street, and in the room nearer the window than the shaft
 //!   starts) no impostor is drawn, and the frame is the geometry's: 99.9 % of the pixels
 //!   identical (the classes change the draw order, so a fragment of equal depth may differ);
+//! - from the rooms, the outside drawn only through the openings and the other rooms only through
+//!   the doorways leading to them change no pixel (99.9 % identical to the frame drawing all of
+//!   it over the whole view) and draw fewer triangles;
 //! - a bundle that is not an object impostor is refused.
 //!
 //! Without an adapter the test fails with the install hint, unless `LEMI_SKIP_GPU_TESTS=1`.
@@ -214,6 +217,46 @@ fn portal_frames_show_the_geometry_and_only_inside_their_cells() {
         }
     }
     assert_eq!(fewer, 3, "the window culled nothing");
+    // from every room's centre, eight ways round and up and down: the other rooms drawn only
+    // through the doorways change no pixel, and where a room is out of sight its walls are not
+    // drawn
+    let layout = lemi_scene::builtin::interior_layout(&spec).expect("layout");
+    let (mut views, mut fewer) = (0, 0);
+    for room in &layout.rooms {
+        let c = (DVec3::from_array(room.min.map(f64::from))
+            + DVec3::from_array(room.max.map(f64::from)))
+            * 0.5;
+        for k in 0..10 {
+            let a = std::f64::consts::TAU * k as f64 / 8.0;
+            let dir = match k {
+                8 => DVec3::new(0.3, 1.0, 0.0),
+                9 => DVec3::new(0.0, -1.0, 0.3),
+                _ => DVec3::new(a.cos(), -0.1, a.sin()),
+            };
+            let v = view(c, c + dir);
+            let request = request(c, &v, &options);
+            let a = strategy.frame(&request).expect("room frame");
+            let b = unwindowed.frame(&request).expect("frame");
+            let (coverage, _, _, same) = compare(&a.frame, &b.frame);
+            let n = (W * H) as usize;
+            assert!(
+                same * 1000 >= n * 999,
+                "{}, {dir}: {same} of {n} identical",
+                room.name
+            );
+            assert!(coverage * 1000 <= n, "{}, {dir}: {coverage}", room.name);
+            assert!(a.near_triangles <= b.near_triangles, "{}, {dir}", room.name);
+            views += 1;
+            if a.near_triangles < b.near_triangles {
+                fewer += 1;
+            }
+        }
+    }
+    println!("rooms: {fewer} of {views} views drew fewer triangles");
+    assert!(
+        fewer * 2 > views,
+        "the rooms culled little: {fewer} of {views}"
+    );
     // inside the window's shaft, looking out through it
     for (eye, target) in [
         (DVec3::new(16.2, 1.75, -3.0), DVec3::new(16.2, 1.75, -40.0)),

@@ -22,14 +22,21 @@ const RENDER_WGSL: &str = include_str!("../render.wgsl");
 /// The quad entry points, appended to the shading module.
 const IMPOSTOR_WGSL: &str = include_str!("impostor.wgsl");
 
+/// Index ranges of uploaded chunks, drawn in this order.
+pub type Ranges<'a> = Vec<(&'a GpuChunk, Range<u32>)>;
+
 /// What one frame of [`ImpostorRenderer::render_composite`] draws.
 #[derive(Default)]
 pub struct Composite<'a> {
     /// Index ranges of uploaded chunks (e.g. the kept ranges of [`crate::CulledGeometry`] culls)
     /// drawn over the whole view.
-    pub geometry: Vec<(&'a GpuChunk, Range<u32>)>,
+    pub geometry: Ranges<'a>,
+    /// Index ranges drawn only inside their own window (a scissor rectangle), after `geometry`:
+    /// e.g. the rooms of an [`lemi_core::enclosure::Enclosure`] seen through doorways
+    /// ([`lemi_core::enclosure::Sight::window`]).
+    pub scissored: Vec<(Window, Ranges<'a>)>,
     /// Index ranges drawn only inside `window` (all of the view without one).
-    pub windowed: Vec<(&'a GpuChunk, Range<u32>)>,
+    pub windowed: Ranges<'a>,
     /// Cells whose quads are drawn, inside `window` (their own near geometry is not drawn:
     /// upload them with an empty near list).
     pub cells: Vec<&'a ImpostorCell>,
@@ -290,20 +297,27 @@ impl ImpostorRenderer {
         globals.params[2] = f32::from(u8::from(self.texel_filter == TexelFilter::Footprint));
         globals.params[3] = f32::from(u8::from(!self.macro_format.is_srgb()));
         let cells = &parts.cells;
-        let window = match parts.window {
-            Some(w) => {
-                let [x0, y0, x1, y1] = w.rect;
-                if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
-                    return Err(GpuError::Invalid(format!(
-                        "window {:?} is empty or outside the {width}x{height} view",
-                        w.rect
-                    )));
-                }
-                Some(w)
+        for w in parts
+            .window
+            .iter()
+            .chain(parts.scissored.iter().map(|(w, _)| w))
+        {
+            let [x0, y0, x1, y1] = w.rect;
+            if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
+                return Err(GpuError::Invalid(format!(
+                    "window {:?} is empty or outside the {width}x{height} view",
+                    w.rect
+                )));
             }
-            None => None,
-        };
-        for (chunk, range) in parts.geometry.iter().chain(&parts.windowed) {
+        }
+        let window = parts.window;
+        let scissored = parts.scissored.iter().flat_map(|(_, r)| r);
+        for (chunk, range) in parts
+            .geometry
+            .iter()
+            .chain(scissored)
+            .chain(&parts.windowed)
+        {
             if materials.bind_group(chunk.material).is_none() {
                 return Err(GpuError::Invalid(format!(
                     "near geometry uses material {} but only {} materials were uploaded",
@@ -361,13 +375,14 @@ impl ImpostorRenderer {
                 "the colour target has no linear view for the quads".into(),
             ));
         }
-        let draw_near = !parts.geometry.is_empty() || !parts.windowed.is_empty();
+        let draw_near = !parts.geometry.is_empty()
+            || !parts.windowed.is_empty()
+            || parts.scissored.iter().any(|(_, r)| !r.is_empty());
         let view_proj = window.map_or_else(|| view.view_proj(), |w| w.view_proj);
-        let scissor = |pass: &mut wgpu::RenderPass<'_>| {
-            if let Some(w) = window {
-                let [x0, y0, x1, y1] = w.rect;
-                pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
-            }
+        // the scissor of `w`, the whole view for `None`
+        let scissor = |pass: &mut wgpu::RenderPass<'_>, w: Option<&Window>| {
+            let [x0, y0, x1, y1] = w.map_or([0, 0, width, height], |w| w.rect);
+            pass.set_scissor_rect(x0, y0, x1 - x0, y1 - y0);
         };
         let quads: Vec<(&ImpostorCell, &(wgpu::Buffer, wgpu::Buffer))> = cells
             .iter()
@@ -401,11 +416,18 @@ impl ImpostorRenderer {
                 pass.set_pipeline(self.near_pipelines.for_cutoff(options.alpha_cutoff));
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
-                let whole = parts.geometry.len();
-                for (i, (chunk, range)) in parts.geometry.iter().chain(&parts.windowed).enumerate()
-                {
-                    if i == whole {
-                        scissor(&mut pass);
+                let groups = std::iter::once((None, &parts.geometry))
+                    .chain(parts.scissored.iter().map(|(w, r)| (Some(w), r)))
+                    .chain(std::iter::once((window.as_ref(), &parts.windowed)));
+                let draws = groups.flat_map(|(w, ranges)| {
+                    ranges
+                        .iter()
+                        .enumerate()
+                        .map(move |(i, r)| ((i == 0).then_some(w), r))
+                });
+                for (first_of, (chunk, range)) in draws {
+                    if let Some(w) = first_of {
+                        scissor(&mut pass, w);
                     }
                     if range.is_empty() {
                         continue;
@@ -431,7 +453,7 @@ impl ImpostorRenderer {
                     true,
                 );
             }
-            scissor(&mut pass);
+            scissor(&mut pass, window.as_ref());
             let mut pipeline = None;
             for (cell, (vertices, indices)) in &quads {
                 pass.set_bind_group(0, &self.globals_group, &[]);

@@ -178,6 +178,12 @@ impl InteriorLayout {
                 .enumerate()
                 .map(|(k, r)| EnclosedRoom {
                     walkable: Aabb::new(v(r.min), v(r.max)),
+                    // the walkable box keeps ROOM_MARGIN from the walls', floor's and ceiling's
+                    // inner faces
+                    inside: Some(Aabb::new(
+                        v(r.min) - DVec3::splat(f64::from(ROOM_MARGIN)),
+                        v(r.max) + DVec3::splat(f64::from(ROOM_MARGIN)),
+                    )),
                     openings: self
                         .portals
                         .iter()
