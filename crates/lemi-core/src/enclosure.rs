@@ -370,6 +370,25 @@ mod tests {
             .view()
     }
 
+    /// The pixel where `view` shows `p`: `None` outside the view or nearer than 0.2 to the eye.
+    fn pixel_of(view: &View, p: DVec3) -> Option<DVec2> {
+        let pr = view.project(p)?;
+        let (x, y) = (pr.pixel.x, pr.pixel.y);
+        ((0.0..view.width as f64).contains(&x)
+            && (0.0..view.height as f64).contains(&y)
+            && pr.view_depth >= 0.2)
+            .then_some(pr.pixel)
+    }
+
+    /// Whether `w` holds `pixel` and its frustum keeps a small box around `p`.
+    fn holds(w: &Window, pixel: DVec2, p: DVec3) -> bool {
+        let [x0, y0, x1, y1] = w.rect.map(f64::from);
+        let r = DVec3::splat(1e-3);
+        (x0..=x1).contains(&pixel.x)
+            && (y0..=y1).contains(&pixel.y)
+            && !crate::frustum::box_outside(p - r, p + r, &w.view_proj)
+    }
+
     #[test]
     fn openings_out_of_view_give_no_window_and_one_ahead_a_tight_one() {
         let e = enclosure();
@@ -503,20 +522,11 @@ mod tests {
                 }
             }
             let p = eye + (q - eye) * t;
-            let Some(pr) = view.project(p) else { return Ok(()) };
-            let (px, py) = (pr.pixel.x, pr.pixel.y);
-            if !(0.0..view.width as f64).contains(&px) || !(0.0..view.height as f64).contains(&py)
-                || pr.view_depth < 0.2 {
-                return Ok(());
-            }
+            let Some(pixel) = pixel_of(&view, p) else { return Ok(()) };
             let w = e.window(&view);
             prop_assert!(w.is_some(), "a visible point outside but no window");
             let w = w.unwrap();
-            let [x0, y0, x1, y1] = w.rect;
-            prop_assert!(px >= x0 as f64 && px <= x1 as f64 && py >= y0 as f64 && py <= y1 as f64,
-                "pixel ({px}, {py}) outside the window {:?}", w.rect);
-            let r = DVec3::splat(1e-3);
-            prop_assert!(!crate::frustum::box_outside(p - r, p + r, &w.view_proj));
+            prop_assert!(holds(&w, pixel, p), "pixel {pixel} outside the window {:?}", w.rect);
         }
 
         /// Every point of the other room's inside that an eye sees through the doorway (the ray
@@ -542,22 +552,13 @@ mod tests {
             if !(through(10.0) && through(10.2)) {
                 return Ok(());
             }
-            let Some(pr) = view.project(p) else { return Ok(()) };
-            let (x, y) = (pr.pixel.x, pr.pixel.y);
-            if !(0.0..view.width as f64).contains(&x) || !(0.0..view.height as f64).contains(&y)
-                || pr.view_depth < 0.2 {
-                return Ok(());
-            }
+            let Some(pixel) = pixel_of(&view, p) else { return Ok(()) };
             let s = e.sight(&view).expect("in a room");
             prop_assert_eq!(s.room, 1 - other);
             let w = s.window([other].into_iter());
             prop_assert!(w.is_some(), "a visible point of the other room but no window");
             let w = w.unwrap();
-            let [x0, y0, x1, y1] = w.rect;
-            prop_assert!(x >= x0 as f64 && x <= x1 as f64 && y >= y0 as f64 && y <= y1 as f64,
-                "pixel ({x}, {y}) outside the window {:?}", w.rect);
-            let r = DVec3::splat(1e-3);
-            prop_assert!(!crate::frustum::box_outside(p - r, p + r, &w.view_proj));
+            prop_assert!(holds(&w, pixel, p), "pixel {pixel} outside the window {:?}", w.rect);
         }
     }
 }

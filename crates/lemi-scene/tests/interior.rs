@@ -55,6 +55,32 @@ fn v3(a: [f32; 3]) -> Vec3 {
     Vec3::from(a)
 }
 
+/// `n` directions spread evenly over the sphere (a golden-angle spiral).
+fn sphere_directions(n: usize) -> Vec<DVec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            let a = golden * i as f64;
+            DVec3::new(r * a.cos(), y, r * a.sin())
+        })
+        .collect()
+}
+
+/// The centre and the eight corners of the box `lo`–`hi`.
+fn centre_and_corners(lo: DVec3, hi: DVec3) -> Vec<DVec3> {
+    let mut eyes = vec![0.5 * (lo + hi)];
+    for k in 0..8 {
+        eyes.push(DVec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        ));
+    }
+    eyes
+}
+
 /// Möller–Trumbore: the ray parameter `t` where `o + t d` crosses the triangle, if it does.
 fn ray_hit(o: DVec3, d: DVec3, tri: &[Vec3; 3]) -> Option<f64> {
     let [a, b, c] = tri.map(|p| p.as_dvec3());
@@ -361,29 +387,11 @@ fn openings_are_open_and_walls_beside_them_are_solid() {
 fn rooms_are_closed_but_for_their_portals() {
     let l = layout();
     let tris = triangles(scene(), true);
-    let n = 600;
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let dirs: Vec<DVec3> = (0..n)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let r = (1.0 - y * y).sqrt();
-            let a = golden * i as f64;
-            DVec3::new(r * a.cos(), y, r * a.sin())
-        })
-        .collect();
+    let dirs = sphere_directions(600);
     let (bmin, bmax) = (v3(l.building_min).as_dvec3(), v3(l.building_max).as_dvec3());
     let mut out = 0;
     for room in &l.rooms {
-        let (lo, hi) = (v3(room.min).as_dvec3(), v3(room.max).as_dvec3());
-        let mut eyes = vec![0.5 * (lo + hi)];
-        for k in 0..8 {
-            eyes.push(DVec3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            ));
-        }
-        for &o in &eyes {
+        for o in centre_and_corners(v3(room.min).as_dvec3(), v3(room.max).as_dvec3()) {
             for &d in &dirs {
                 if tris
                     .iter()
@@ -444,16 +452,7 @@ fn what_a_room_sees_directly_touches_its_inside() {
     let e = l.enclosure();
     assert!(e.validate().is_ok());
     let tris = triangles(scene(), true);
-    let n = 600;
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let dirs: Vec<DVec3> = (0..n)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
-            let r = (1.0 - y * y).sqrt();
-            let a = golden * i as f64;
-            DVec3::new(r * a.cos(), y, r * a.sin())
-        })
-        .collect();
+    let dirs = sphere_directions(600);
     let tol = 1e-4;
     let touches = |t: &[Vec3; 3], b: &lemi_core::Aabb| {
         let lo = t[0].min(t[1]).min(t[2]).as_dvec3();
@@ -484,16 +483,7 @@ fn what_a_room_sees_directly_touches_its_inside() {
     let (mut direct, mut through) = (0, 0);
     for (k, room) in e.rooms.iter().enumerate() {
         let inside = room.inside.expect("builtin rooms know their inside");
-        let (lo, hi) = (room.walkable.min, room.walkable.max);
-        let mut eyes = vec![0.5 * (lo + hi)];
-        for c in 0..8 {
-            eyes.push(DVec3::new(
-                if c & 1 == 0 { lo.x } else { hi.x },
-                if c & 2 == 0 { lo.y } else { hi.y },
-                if c & 4 == 0 { lo.z } else { hi.z },
-            ));
-        }
-        for &o in &eyes {
+        for o in centre_and_corners(room.walkable.min, room.walkable.max) {
             for &d in &dirs {
                 // where the ray leaves the inside box, and through which face
                 let (t_exit, axis) = (0..3)
