@@ -26,7 +26,11 @@
 //! earlier and prints how many pixels differ (to check that an optimisation changes no pixel).
 //! `--no-geometry` skips the reference renderer; `--parts` also reports the GPU time of the
 //! quads alone (`render_impostors_only`) and of the near geometry alone (drawn by the reference
-//! renderer); `--stats` prints how much of each face image the quads cover.
+//! renderer); `--stats` prints how much of each face image the quads cover, and with `--parts`
+//! where their pixels go on screen: how many quads a pixel of the far field lies under, how many
+//! quads lie wholly behind the near geometry, behind the whole frame's depth, and (alpha-tested
+//! ones) behind the near geometry and the opaque quads: what culling quads against each could
+//! leave out.
 //!
 //! What the GPU time measures on Mesa's lavapipe (Vulkan on llvmpipe): the rasterization itself,
 //! not only command submission. The timestamp written at the end of the pass is taken when the
@@ -220,6 +224,134 @@ fn differing_pixels(f: &Frame, bytes: &[u8]) -> usize {
         .count()
 }
 
+/// Screen pixels inside quad `q` in `view`, with its nearest and farthest view depth.
+fn quad_pixels(q: &lemi_core::bundle::Quad, view: &View) -> Option<(Vec<usize>, f64, f64)> {
+    let (w, h) = (view.width as usize, view.height as usize);
+    let p: Vec<_> = (q.corners.iter())
+        .filter_map(|c| view.project(DVec3::from_array(c.map(f64::from))))
+        .collect();
+    if p.len() < 4 {
+        return None;
+    }
+    let nearest = p.iter().map(|p| p.view_depth).fold(f64::INFINITY, f64::min);
+    let farthest = p.iter().map(|p| p.view_depth).fold(0.0, f64::max);
+    let lo = p
+        .iter()
+        .fold(glam::DVec2::splat(f64::INFINITY), |a, p| a.min(p.pixel));
+    let hi = p
+        .iter()
+        .fold(glam::DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(p.pixel));
+    let (x0, y0) = (
+        lo.x.floor().max(0.0) as usize,
+        lo.y.floor().max(0.0) as usize,
+    );
+    let (x1, y1) = (
+        (hi.x.ceil().max(0.0) as usize).min(w),
+        (hi.y.ceil().max(0.0) as usize).min(h),
+    );
+    let sign = (p[1].pixel - p[0].pixel)
+        .perp_dot(p[2].pixel - p[0].pixel)
+        .signum();
+    let mut px = Vec::new();
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let c = glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+            if (0..4).all(|i| {
+                let (a, b) = (p[i].pixel, p[(i + 1) % 4].pixel);
+                (b - a).perp_dot(c - a) * sign >= 0.0
+            }) {
+                px.push(y * w + x);
+            }
+        }
+    }
+    Some((px, nearest, farthest))
+}
+
+/// Alpha-tested quads wholly behind the near geometry and the opaque quads (each opaque quad
+/// taken at its farthest depth): what culling them after drawing those would leave out.
+fn alpha_behind_opaque(
+    quads: &[lemi_core::bundle::Quad],
+    opaque: &[bool],
+    view: &View,
+    near: &Frame,
+    name: &str,
+) {
+    let mut occ: Vec<f64> = near.depth.iter().map(|&d| d as f64).collect();
+    for (q, _) in quads.iter().zip(opaque).filter(|(_, &o)| o) {
+        if let Some((px, _, far)) = quad_pixels(q, view) {
+            for i in px {
+                occ[i] = occ[i].min(far);
+            }
+        }
+    }
+    let (mut n, mut area, mut cn, mut carea) = (0u64, 0u64, 0u64, 0u64);
+    for (q, _) in quads.iter().zip(opaque).filter(|(_, &o)| !o) {
+        if let Some((px, nearest, _)) = quad_pixels(q, view) {
+            if px.is_empty() {
+                continue;
+            }
+            n += 1;
+            area += px.len() as u64;
+            if px.iter().all(|&i| occ[i] < nearest * (1.0 - 1e-4)) {
+                cn += 1;
+                carea += px.len() as u64;
+            }
+        }
+    }
+    println!(
+        "  {name}: {n} alpha-tested quads on screen ({:.2} Mpx); {cn} ({:.2} Mpx) wholly behind \
+         the near geometry and the opaque quads",
+        area as f64 / 1e6,
+        carea as f64 / 1e6
+    );
+}
+
+/// Where the quads' rasterized pixels go (`--stats --parts`): how many quads are on screen, how
+/// many are not wholly behind the depth of `behind` (the near geometry's frame, or the whole
+/// frame's), and per pixel of the far field, how many quads cover it.
+fn quad_overdraw(quads: &[lemi_core::bundle::Quad], view: &View, behind: &Frame, name: &str) {
+    let (w, h) = (view.width as usize, view.height as usize);
+    let mut count = vec![0u16; w * h];
+    let (mut total, mut hidden) = (0u64, 0u64);
+    let (mut visible_quads, mut visible_area, mut on_screen) = (0u64, 0u64, 0u64);
+    for q in quads {
+        let Some((px, nearest, _)) = quad_pixels(q, view) else {
+            continue;
+        };
+        if px.is_empty() {
+            continue;
+        }
+        on_screen += 1;
+        total += px.len() as u64;
+        let mut seen = false;
+        for i in px.iter().copied() {
+            if f64::from(behind.depth[i]) < nearest * (1.0 - 1e-4) {
+                hidden += 1;
+            } else {
+                count[i] = count[i].saturating_add(1);
+                seen = true;
+            }
+        }
+        if seen {
+            visible_quads += 1;
+            visible_area += px.len() as u64;
+        }
+    }
+    let open: Vec<u16> = count.iter().copied().filter(|&c| c > 0).collect();
+    let layers: u64 = open.iter().map(|&c| u64::from(c)).sum();
+    println!(
+        "  {name}: {on_screen} quads on screen cover {:.2} Mpx ({:.2} x the view), {:.0} % of it \
+         behind the depth; {visible_quads} quads not wholly behind it cover {:.2} Mpx; the rest \
+         lies on {:.0} % of the view, {:.2} quads deep on average",
+        total as f64 / 1e6,
+        total as f64 / (w * h) as f64,
+        100.0 * hidden as f64 / total.max(1) as f64,
+        visible_area as f64 / 1e6,
+        100.0 * open.len() as f64 / (w * h) as f64,
+        layers as f64 / open.len().max(1) as f64
+    );
+}
+
 fn save_or_check(args: &Args, name: &str, f: &Frame, diffs: &mut Vec<(String, usize)>) {
     if let Some(dir) = &args.save {
         let _ = std::fs::create_dir_all(dir);
@@ -315,6 +447,7 @@ fn main() -> Result<(), Error> {
     let materials = Arc::clone(&all.materials);
     let mut impostors = ImpostorRenderer::new(&gpu)?;
     impostors.set_texel_filter(args.texel_filter);
+
     let reference = Renderer::new(&gpu)?;
     let options = RenderOptions::default();
     let dirs = [
@@ -427,6 +560,21 @@ fn main() -> Result<(), Error> {
                 // far-field pixels: drawn in the impostor frame, not by the near geometry (quads
                 // lie beyond the near field, never in front of it)
                 let n = reference.render(near, &v, &options)?;
+                if args.stats {
+                    quad_overdraw(&file.header.quads, &v, &n, &format!("{dname} (near)"));
+                    quad_overdraw(&file.header.quads, &v, &f, "  (whole frame)");
+                    let opaque: Vec<bool> = (file.header.quads.iter())
+                        .map(|q| {
+                            let m = &macros[q.macro_index as usize];
+                            let [x, y, rw, rh] = q.rect;
+                            (y..y + rh).all(|yy| {
+                                (x..x + rw)
+                                    .all(|xx| m.rgba[(4 * (yy * m.width + xx) + 3) as usize] >= 128)
+                            })
+                        })
+                        .collect();
+                    alpha_behind_opaque(&file.header.quads, &opaque, &v, &n, dname);
+                }
                 let far = f.covered_count().saturating_sub(n.covered_count());
                 cell_shares.push(far as f64 / (f.width as f64 * f.height as f64));
             }
