@@ -29,6 +29,8 @@ struct Globals {
 struct MaterialUniform {
     // Linear RGBA base colour factor.
     base_color: vec4<f32>,
+    // x: 1 when the material has a texture (otherwise its texture is white and not sampled).
+    textured: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> globals: Globals;
@@ -69,7 +71,13 @@ fn transform_vertex(v: VertexIn) -> VertexOut {
 
 // Linear RGBA albedo of a fragment: base colour factor × texture × vertex colour.
 fn surface_albedo(in: VertexOut) -> vec4<f32> {
-    let t = textureSample(base_texture, base_sampler, in.uv);
+    // a material without a texture is not sampled (its bound 1×1 white texture would give 1
+    // exactly): the same colour, without a filtered fetch per fragment, as renderers draw
+    // untextured materials; the branch is uniform (a uniform buffer's value)
+    var t = vec4<f32>(1.0);
+    if (material.textured.x > 0.5) {
+        t = textureSample(base_texture, base_sampler, in.uv);
+    }
     return material.base_color * t * in.color;
 }
 
