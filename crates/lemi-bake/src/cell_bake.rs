@@ -32,7 +32,7 @@ use lemi_core::bundle::{
 use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
-    compress_face, encode_blocks, pack_cell, write_ktx2, CompressError, CompressOptions,
+    compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, CompressError, CompressOptions,
     FaceLayers, MicroTextureOptions, PackingOptions, Supercompression, TextureFormat,
 };
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
@@ -245,6 +245,24 @@ impl<'a> Baker<'a> {
                     .map_err(encode_err)?,
                 0,
             ),
+            Some(_) if format.basis().is_some() => {
+                let basis = format.basis().expect("checked by the guard");
+                // one macro-texture at a time: the encoder runs its own threads
+                let encoded: Vec<(Vec<u8>, u64)> = compressed
+                    .macro_textures
+                    .iter()
+                    .map(|m| {
+                        encode_basis(basis, m.width, m.height, &m.rgba)
+                            .map(|(ktx2, stats)| (ktx2, stats.block_bytes))
+                    })
+                    .collect::<Result<_, lemi_core::compress::CompressError>>()
+                    .map_err(|source| BakeError::Compress {
+                        cell: cell.id(),
+                        source,
+                    })?;
+                let bytes = encoded.iter().map(|e| e.1).sum();
+                (encoded.into_iter().map(|e| e.0).collect(), bytes)
+            }
             Some(block) => {
                 let encoded: Vec<(Vec<u8>, u64)> = compressed
                     .macro_textures

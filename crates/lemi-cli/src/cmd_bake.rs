@@ -139,13 +139,9 @@ pub(crate) fn texture_format_for(given: Option<TextureFormat>, hlod: bool) -> Te
 
 /// `--texture-format NAME`.
 pub(crate) fn parse_texture_format(name: &str) -> std::result::Result<TextureFormat, String> {
-    match name {
-        "uastc" | "etc1s" => Err(format!(
-            "{name} (Basis Universal) is not available in this lemi yet; use png, bc7 or bc1"
-        )),
-        _ => TextureFormat::from_name(name)
-            .ok_or_else(|| format!("unknown texture format `{name}`: png, bc7 or bc1")),
-    }
+    TextureFormat::from_name(name).ok_or_else(|| {
+        format!("unknown texture format `{name}`: png, bc7, bc1, uastc or etc1s")
+    })
 }
 
 /// Default output view (as `lemi layers`).

@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cell::{CellGrid, CellId, ViewCell};
 use crate::compress::{
-    decode_blocks, read_ktx2, BlockFormat, Ktx2Texture, MacroTexture, TextureFormat,
+    decode_blocks, read_basis_ktx2, read_ktx2, transcode_basis, BasisFormat, BlockFormat,
+    Ktx2Texture, MacroTexture, TextureFormat,
 };
 use crate::container::{self, Blob, ContainerError};
 use crate::object_cell::ObjectSetup;
@@ -924,7 +925,11 @@ impl CellFile {
                 )));
             }
         }
-        if let Some(format) = header.texture_format.block() {
+        if let Some(basis) = header.texture_format.basis() {
+            for (m, blob) in header.macros.iter().zip(&macro_blobs) {
+                check_basis_ktx2(m, basis, blob)?;
+            }
+        } else if let Some(format) = header.texture_format.block() {
             for (m, blob) in header.macros.iter().zip(&macro_blobs) {
                 check_ktx2(m, format, blob)?;
             }
@@ -939,6 +944,26 @@ impl CellFile {
     /// The block-compressed macro-textures as stored (level 0), ready to upload to a GPU that has
     /// the format; `None` for a PNG cell.
     pub fn block_macros(&self) -> Result<Option<Vec<BlockMacro>>, ContainerError> {
+        if let Some(basis) = self.header.texture_format.basis() {
+            return self
+                .header
+                .macros
+                .iter()
+                .zip(&self.macro_blobs)
+                .map(|(m, blob)| {
+                    check_basis_ktx2(m, basis, blob)?;
+                    let t = transcode_basis(blob)
+                        .map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
+                    Ok(BlockMacro {
+                        format: t.format,
+                        width: t.width,
+                        height: t.height,
+                        data: t.blocks,
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()
+                .map(Some);
+        }
         let Some(format) = self.header.texture_format.block() else {
             return Ok(None);
         };
@@ -1013,6 +1038,31 @@ pub struct BlockMacro {
     pub width: u32,
     pub height: u32,
     pub data: Vec<u8>,
+}
+
+/// Reads the header of a macro-texture's Basis Universal KTX2 blob and checks it against its
+/// header entry and the cell's format (the data itself is checked by transcoding it).
+fn check_basis_ktx2(m: &MacroInfo, format: BasisFormat, blob: &[u8]) -> Result<(), ContainerError> {
+    let t = read_basis_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
+    if t.format != format || t.width != m.width || t.height != m.height {
+        return Err(ContainerError::Header(format!(
+            "{}: KTX2 of {:?} {}x{}, the header says {} {}x{}",
+            m.name,
+            t.format,
+            t.width,
+            t.height,
+            format.texture_format(),
+            m.width,
+            m.height
+        )));
+    }
+    if m.width % 4 != 0 || m.height % 4 != 0 {
+        return Err(ContainerError::Header(format!(
+            "{}: a Basis Universal macro-texture of {}x{} texels (sides must be multiples of 4)",
+            m.name, m.width, m.height
+        )));
+    }
+    Ok(())
 }
 
 /// Reads a macro-texture's KTX2 blob and checks it against its header entry and the cell's format.

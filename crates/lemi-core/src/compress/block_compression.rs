@@ -26,6 +26,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::basis_universal::BasisFormat;
 use super::CompressError;
 
 /// How a bundle stores its macro-textures (`lemi bake --texture-format`).
@@ -39,11 +40,20 @@ pub enum TextureFormat {
     Bc7,
     /// BC1 with punch-through alpha (8 bytes per 4×4 block) in KTX2.
     Bc1,
+    /// Basis Universal ETC1S (BasisLZ) in KTX2, transcoded to BC1 at load time.
+    Etc1s,
+    /// Basis Universal UASTC (Zstandard) in KTX2, transcoded to BC7 at load time.
+    Uastc,
 }
 
 impl TextureFormat {
-    pub const ALL: [TextureFormat; 3] =
-        [TextureFormat::Png, TextureFormat::Bc7, TextureFormat::Bc1];
+    pub const ALL: [TextureFormat; 5] = [
+        TextureFormat::Png,
+        TextureFormat::Bc7,
+        TextureFormat::Bc1,
+        TextureFormat::Etc1s,
+        TextureFormat::Uastc,
+    ];
 
     /// The name used on the command line and in JSON.
     pub fn name(self) -> &'static str {
@@ -51,6 +61,8 @@ impl TextureFormat {
             TextureFormat::Png => "png",
             TextureFormat::Bc7 => "bc7",
             TextureFormat::Bc1 => "bc1",
+            TextureFormat::Etc1s => "etc1s",
+            TextureFormat::Uastc => "uastc",
         }
     }
 
@@ -58,12 +70,23 @@ impl TextureFormat {
         *self == TextureFormat::Png
     }
 
-    /// The block format, `None` for PNG.
+    /// The block format the GPU samples, `None` for PNG (a Basis Universal format's is the one
+    /// it is transcoded to).
     pub fn block(self) -> Option<BlockFormat> {
         match self {
             TextureFormat::Png => None,
             TextureFormat::Bc7 => Some(BlockFormat::Bc7),
             TextureFormat::Bc1 => Some(BlockFormat::Bc1),
+            TextureFormat::Etc1s | TextureFormat::Uastc => self.basis().map(|b| b.runtime_block()),
+        }
+    }
+
+    /// The Basis Universal encoding, `None` for the formats stored as sampled.
+    pub fn basis(self) -> Option<BasisFormat> {
+        match self {
+            TextureFormat::Etc1s => Some(BasisFormat::Etc1s),
+            TextureFormat::Uastc => Some(BasisFormat::Uastc),
+            _ => None,
         }
     }
 
@@ -188,6 +211,28 @@ fn prepare_block(px: &mut [[u8; 4]; 16]) {
     }
 }
 
+/// The image as block encoders get it ([`prepare_block`] over every 4×4 block): binary alpha,
+/// transparent texels in the mean colour of their block's opaque texels.
+pub fn prepare_image(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, CompressError> {
+    check_image(width, height, rgba)?;
+    let mut out = rgba.to_vec();
+    let w = width as usize;
+    for by in 0..height.div_ceil(BLOCK) {
+        for bx in 0..width.div_ceil(BLOCK) {
+            let mut px = read_block(rgba, width, height, bx, by);
+            prepare_block(&mut px);
+            for (i, p) in px.iter().enumerate() {
+                let (x, y) = (bx * BLOCK + i as u32 % BLOCK, by * BLOCK + i as u32 / BLOCK);
+                if x < width && y < height {
+                    let o = 4 * (y as usize * w + x as usize);
+                    out[o..o + 4].copy_from_slice(p);
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
 fn check_image(width: u32, height: u32, rgba: &[u8]) -> Result<(), CompressError> {
     if width == 0 || height == 0 || rgba.len() != 4 * width as usize * height as usize {
         return Err(CompressError::Invalid(format!(
@@ -225,15 +270,7 @@ pub fn encode_blocks(
             encode_row(format, &blocks, row);
             let mut fixed = 0;
             for (px, block) in blocks.iter().zip(row.chunks_exact_mut(bb)) {
-                let decoded = format.decode_block(block);
-                if px.iter().zip(&decoded).any(|(a, b)| opaque(a) != opaque(b)) {
-                    let exact = match format {
-                        BlockFormat::Bc7 => bc7_mode5_block(px).to_vec(),
-                        BlockFormat::Bc1 => bc1_three_colour_block(px).to_vec(),
-                    };
-                    block.copy_from_slice(&exact);
-                    fixed += 1;
-                }
+                fixed += fix_alpha(format, px, block) as u64;
             }
             fixed
         })
@@ -247,6 +284,56 @@ pub fn encode_blocks(
 }
 
 /// Encodes one row of prepared blocks with the format's encoder.
+/// Keeps the alpha test exact: when `block` decodes with a texel's alpha on the other side of 128
+/// than in `px` (binary alpha, as [`prepare_block`] leaves it), replaces it with an exact-alpha
+/// encoding of `px` (BC7 mode 5, BC1's three-colour mode); says whether it did.
+fn fix_alpha(format: BlockFormat, px: &[[u8; 4]; 16], block: &mut [u8]) -> bool {
+    let decoded = format.decode_block(block);
+    if px.iter().zip(&decoded).all(|(a, b)| opaque(a) == opaque(b)) {
+        return false;
+    }
+    match format {
+        BlockFormat::Bc7 => block.copy_from_slice(&bc7_mode5_block(px)),
+        BlockFormat::Bc1 => block.copy_from_slice(&bc1_three_colour_block(px)),
+    }
+    true
+}
+
+/// Makes the alpha test of `blocks` (a `width × height` image of `format`, e.g. transcoded from
+/// another encoding) exact against `rgba`, the texels it must show: every block that decodes with
+/// a texel on the wrong side of alpha 128 is re-encoded exactly from `rgba` (transparent texels in
+/// the mean opaque colour of their block). Returns the number of blocks replaced.
+pub fn make_alpha_exact(
+    format: BlockFormat,
+    width: u32,
+    height: u32,
+    rgba: &[u8],
+    blocks: &mut [u8],
+) -> Result<u64, CompressError> {
+    check_image(width, height, rgba)?;
+    if blocks.len() != format.image_bytes(width, height) {
+        return Err(CompressError::Invalid(format!(
+            "{format:?} data of {} bytes cannot hold an image of {width}×{height} texels",
+            blocks.len()
+        )));
+    }
+    let bw = width.div_ceil(BLOCK);
+    let bb = format.block_bytes();
+    Ok(blocks
+        .par_chunks_mut(bw as usize * bb)
+        .enumerate()
+        .map(|(by, row)| {
+            let mut fixed = 0;
+            for (bx, block) in row.chunks_exact_mut(bb).enumerate() {
+                let mut px = read_block(rgba, width, height, bx as u32, by as u32);
+                prepare_block(&mut px);
+                fixed += fix_alpha(format, &px, block) as u64;
+            }
+            fixed
+        })
+        .sum())
+}
+
 fn encode_row(format: BlockFormat, blocks: &[[[u8; 4]; 16]], out: &mut [u8]) {
     match format {
         BlockFormat::Bc7 => {

@@ -36,7 +36,6 @@ const KHR_DF_CHANNEL_BC1A_ALPHA: u8 = 1;
 const KHR_DF_SAMPLE_DATATYPE_LINEAR: u8 = 0x10;
 const HEADER_BYTES: usize = 80;
 const LEVEL_INDEX_BYTES: usize = 24;
-const WRITER: &str = "lemi";
 /// The largest side the reader accepts (the packer's sides are at most 4096; 16384 is the
 /// largest 2D texture most GPUs sample).
 pub const MAX_SIDE: u32 = 16384;
@@ -185,67 +184,123 @@ pub fn write_ktx2(
             .collect::<std::io::Result<_>>()
             .map_err(|e| Ktx2Error::Write(format!("Zstandard: {e}")))?,
     };
-    let n = levels.len();
-    let dfd = dfd(format);
-    let mut kvd = Vec::new();
-    let entry = format!("KTXwriter\0{WRITER}\0");
-    kvd.extend_from_slice(&(entry.len() as u32).to_le_bytes());
-    kvd.extend_from_slice(entry.as_bytes());
-    pad_to(&mut kvd, 4);
-    let dfd_offset = HEADER_BYTES + n * LEVEL_INDEX_BYTES;
-    let kvd_offset = dfd_offset + dfd.len();
+    let raw: Vec<u64> = levels.iter().map(|l| l.len() as u64).collect();
     // lcm(8 or 16, 4) without supercompression, 1 with (KTX 2.0 sec. 3.13)
     let align = match supercompression {
         Supercompression::None => format.block_bytes().max(4),
         Supercompression::Zstd => 1,
     };
-    // level data after the key/value data, smallest level first
+    Ok(assemble(&Layout {
+        vk_format: vk_format(format),
+        width,
+        height,
+        dfd: &dfd(format),
+        scheme: supercompression.scheme(),
+        global_data: &[],
+        key_values: &[],
+        levels: &stored.iter().map(|s| &s[..]).collect::<Vec<_>>(),
+        raw_lengths: &raw,
+        align,
+    }))
+}
+
+/// What [`assemble`] lays out as a KTX2 file.
+pub(crate) struct Layout<'a> {
+    pub vk_format: u32,
+    pub width: u32,
+    pub height: u32,
+    /// The data format descriptor, `dfdTotalSize` first.
+    pub dfd: &'a [u8],
+    pub scheme: u32,
+    /// Supercompression global data (BasisLZ's codebooks; empty otherwise).
+    pub global_data: &'a [u8],
+    /// Key/value pairs after `KTXwriter` (keys without their NUL).
+    pub key_values: &'a [(&'a str, &'a [u8])],
+    /// The levels as stored (after supercompression), level 0 first.
+    pub levels: &'a [&'a [u8]],
+    /// Each level's `uncompressedByteLength` (0 for BasisLZ).
+    pub raw_lengths: &'a [u64],
+    /// Alignment of each level's data.
+    pub align: usize,
+}
+
+/// Lays out a 2D, one-face KTX2 file (KTX 2.0 secs. 3.1-3.13): header, level index, data format
+/// descriptor, key/value data (`KTXwriter` = lemi, then `key_values` sorted by key as the
+/// specification asks), global data aligned to 8, levels smallest first.
+pub(crate) fn assemble(l: &Layout) -> Vec<u8> {
+    let n = l.levels.len();
+    let mut kvd = Vec::new();
+    let mut entries: Vec<(String, &[u8])> = vec![("KTXwriter".into(), b"lemi\0")];
+    entries.extend(l.key_values.iter().map(|(k, v)| (k.to_string(), *v)));
+    entries.sort_by(|a, b| a.0.cmp(&b.0));
+    for (key, value) in entries {
+        kvd.extend_from_slice(&((key.len() + 1 + value.len()) as u32).to_le_bytes());
+        kvd.extend_from_slice(key.as_bytes());
+        kvd.push(0);
+        kvd.extend_from_slice(value);
+        pad_to(&mut kvd, 4);
+    }
+    let dfd_offset = HEADER_BYTES + n * LEVEL_INDEX_BYTES;
+    let kvd_offset = dfd_offset + l.dfd.len();
+    let mut sgd_offset = kvd_offset + kvd.len();
+    if !l.global_data.is_empty() {
+        sgd_offset = sgd_offset.div_ceil(8) * 8;
+    }
+    // level data after the global data, smallest level first
     let mut offsets = vec![0usize; n];
-    let mut end = kvd_offset + kvd.len();
-    for l in (0..n).rev() {
-        end = end.div_ceil(align) * align;
-        offsets[l] = end;
-        end += stored[l].len();
+    let mut end = sgd_offset + l.global_data.len();
+    for lv in (0..n).rev() {
+        end = end.div_ceil(l.align) * l.align;
+        offsets[lv] = end;
+        end += l.levels[lv].len();
     }
     let mut out = Vec::with_capacity(end);
     out.extend_from_slice(&IDENTIFIER);
     for v in [
-        vk_format(format),
-        1, // typeSize: 1 for block-compressed formats
-        width,
-        height,
+        l.vk_format,
+        1, // typeSize: 1 for block-compressed and Basis formats
+        l.width,
+        l.height,
         0, // pixelDepth
         0, // layerCount: not an array
         1, // faceCount
         n as u32,
-        supercompression.scheme(),
+        l.scheme,
     ] {
         out.extend_from_slice(&v.to_le_bytes());
     }
     for v in [
         dfd_offset as u32,
-        dfd.len() as u32,
+        l.dfd.len() as u32,
         kvd_offset as u32,
         kvd.len() as u32,
     ] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    out.extend_from_slice(&0u64.to_le_bytes()); // sgdByteOffset
-    out.extend_from_slice(&0u64.to_le_bytes()); // sgdByteLength
-    for l in 0..n {
-        let (len, raw) = (stored[l].len() as u64, levels[l].len() as u64);
-        for v in [offsets[l] as u64, len, raw] {
+    let sgd_at = if l.global_data.is_empty() { 0 } else { sgd_offset };
+    out.extend_from_slice(&(sgd_at as u64).to_le_bytes()); // sgdByteOffset
+    out.extend_from_slice(&(l.global_data.len() as u64).to_le_bytes()); // sgdByteLength
+    for lv in 0..n {
+        for v in [
+            offsets[lv] as u64,
+            l.levels[lv].len() as u64,
+            l.raw_lengths[lv],
+        ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }
-    out.extend_from_slice(&dfd);
+    out.extend_from_slice(l.dfd);
     out.extend_from_slice(&kvd);
-    for l in (0..n).rev() {
-        pad_to(&mut out, align);
-        debug_assert_eq!(out.len(), offsets[l]);
-        out.extend_from_slice(&stored[l]);
+    if !l.global_data.is_empty() {
+        pad_to(&mut out, 8);
+        out.extend_from_slice(l.global_data);
     }
-    Ok(out)
+    for lv in (0..n).rev() {
+        pad_to(&mut out, l.align);
+        debug_assert_eq!(out.len(), offsets[lv]);
+        out.extend_from_slice(l.levels[lv]);
+    }
+    out
 }
 
 fn u32_at(b: &[u8], o: usize) -> u32 {

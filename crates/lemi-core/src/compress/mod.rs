@@ -9,6 +9,7 @@
 //! | micro-textures (impostor quads) | [`micro_textures`] | sec. 5.3 |
 //! | macro-texture packing | [`macro_packing`] | sec. 5.4 |
 //! | GPU block formats (BC7, BC1) | [`block_compression`] | KDFS 1.3 secs. 21–22 |
+//! | Basis Universal (ETC1S, UASTC) | [`basis_universal`] | KTX 2.0 sec. 3.12 |
 //! | KTX2 container | [`ktx2_container`] | KTX 2.0 |
 //!
 //! PNG storage of the macro-textures (end of sec. 5.4) belongs to the bundle writer, as does the
@@ -16,6 +17,7 @@
 //! [`compress_cell`] runs the stages in order for one view cell, in parallel over faces and layers
 //! (deterministic: the result does not depend on the thread count). See `docs/COMPRESSION.md`.
 
+pub mod basis_universal;
 pub mod block_compression;
 pub mod gap_fill;
 pub mod hidden_texels;
@@ -26,8 +28,12 @@ pub mod micro_textures;
 
 use rayon::prelude::*;
 
+pub use basis_universal::{
+    encode_basis, read_basis_ktx2, transcode_basis, BasisEncodeStats, BasisFormat, BasisKtx2,
+    TranscodedBasis,
+};
 pub use block_compression::{
-    analyze_blocks, decode_blocks, encode_blocks, BlockEncodeStats, BlockFormat, BlockQuality,
+    analyze_blocks, decode_blocks, encode_blocks, make_alpha_exact, BlockEncodeStats, BlockFormat, BlockQuality,
     TextureFormat,
 };
 pub use gap_fill::{
