@@ -32,8 +32,9 @@ use lemi_core::bundle::{
 use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
-    compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, CompressError, CompressOptions,
-    FaceLayers, MicroTextureOptions, PackingOptions, Supercompression, TextureFormat,
+    compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, CompressError,
+    CompressOptions, FaceLayers, MicroTextureOptions, PackingOptions, Supercompression,
+    TextureFormat,
 };
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;

@@ -139,9 +139,8 @@ pub(crate) fn texture_format_for(given: Option<TextureFormat>, hlod: bool) -> Te
 
 /// `--texture-format NAME`.
 pub(crate) fn parse_texture_format(name: &str) -> std::result::Result<TextureFormat, String> {
-    TextureFormat::from_name(name).ok_or_else(|| {
-        format!("unknown texture format `{name}`: png, bc7, bc1, uastc or etc1s")
-    })
+    TextureFormat::from_name(name)
+        .ok_or_else(|| format!("unknown texture format `{name}`: png, bc7, bc1, uastc or etc1s"))
 }
 
 /// Default output view (as `lemi layers`).

@@ -1,8 +1,9 @@
-//! Block-compressed bakes through the certificate: a BC7 and a BC1 bake of one cell of a small
-//! city, uploaded as stored where the adapter has BC (lavapipe does) and decoded to RGBA8
-//! elsewhere, show no crack pixel from the cell's centre and corners, and their mean FLIP
-//! against the reference stays within 0.01 of the PNG bake's; the pages hold a quarter (BC7) and
-//! an eighth (BC1) of the PNG bake's texture memory, give or take the block padding. Compared
+//! Compressed bakes through the certificate: a BC7, BC1, UASTC and ETC1S bake of one cell of a
+//! small city, uploaded as stored (the Basis formats transcoded to BC7 and BC1) where the adapter
+//! has BC (lavapipe does) and decoded to RGBA8 elsewhere, show no crack pixel from the cell's
+//! centre and corners, and their mean FLIP against the reference stays within 0.01 of the PNG
+//! bake's (0.02 for ETC1S); the pages hold a quarter (BC7, UASTC) and an eighth (BC1, ETC1S) of
+//! the PNG bake's texture memory, give or take the block padding. Compared
 //! with the PNG bake's frames of the same views (`lemi eval --against`), they change colours but
 //! no pixel's coverage (the alpha test stays exact), and a bake compared with itself changes
 //! nothing.
@@ -16,7 +17,7 @@ use glam::DVec3;
 use lemi_bake::{BakeJob, Baker};
 use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
 use lemi_core::cell::CellGrid;
-use lemi_core::compress::TextureFormat;
+use lemi_core::compress::{BlockFormat, TextureFormat};
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
 use lemi_eval::{evaluate_bundle_against, EvalOptions, ViewpointSet};
@@ -64,7 +65,7 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, format: TextureFormat) -> Bundle {
 }
 
 #[test]
-fn bc7_and_bc1_bakes_render_without_cracks_and_close_to_the_png_bake() {
+fn every_texture_format_renders_without_cracks_and_close_to_the_png_bake() {
     let Some(gpu) = gpu() else { return };
     let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
     let tmp = tempfile::tempdir().unwrap();
@@ -78,7 +79,7 @@ fn bc7_and_bc1_bakes_render_without_cracks_and_close_to_the_png_bake() {
     };
     let mut png = None;
     let mut png_bundle: Option<Bundle> = None;
-    for format in [TextureFormat::Png, TextureFormat::Bc7, TextureFormat::Bc1] {
+    for format in TextureFormat::ALL {
         let bundle = bake(&gpu, &scene, &tmp.path().join(format.name()), format);
         let id = bundle.cell_ids()[0];
         let file = bundle.cell(id).unwrap();
@@ -146,8 +147,15 @@ fn bc7_and_bc1_bakes_render_without_cracks_and_close_to_the_png_bake() {
         match png {
             None => png = Some((s.mean_flip, resident)),
             Some((flip, png_resident)) => {
+                // ETC1S codes a block with one base colour and shared codebooks: the smallest
+                // files, about twice BC1's colour error (round trips in `basis_universal`)
+                let bound = if format == TextureFormat::Etc1s {
+                    0.02
+                } else {
+                    0.01
+                };
                 assert!(
-                    (s.mean_flip - flip).abs() <= 0.01,
+                    (s.mean_flip - flip).abs() <= bound,
                     "{format}: mean FLIP {} against the PNG bake's {flip}",
                     s.mean_flip
                 );
@@ -155,7 +163,7 @@ fn bc7_and_bc1_bakes_render_without_cracks_and_close_to_the_png_bake() {
                     // BC7 1 byte a texel, BC1 half, RGBA8 4; padding every micro-texture to
                     // whole 4×4 blocks adds up to half again on small micro-textures (1.52× on a
                     // city cell, docs/COMPRESSION.md), so at most a half and a quarter
-                    let (num, den) = if format == TextureFormat::Bc7 {
+                    let (num, den) = if format.block() == Some(BlockFormat::Bc7) {
                         (1, 2)
                     } else {
                         (1, 4)

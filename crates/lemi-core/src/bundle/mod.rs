@@ -1043,7 +1043,8 @@ pub struct BlockMacro {
 /// Reads the header of a macro-texture's Basis Universal KTX2 blob and checks it against its
 /// header entry and the cell's format (the data itself is checked by transcoding it).
 fn check_basis_ktx2(m: &MacroInfo, format: BasisFormat, blob: &[u8]) -> Result<(), ContainerError> {
-    let t = read_basis_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
+    let t =
+        read_basis_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
     if t.format != format || t.width != m.width || t.height != m.height {
         return Err(ContainerError::Header(format!(
             "{}: KTX2 of {:?} {}x{}, the header says {} {}x{}",

@@ -131,7 +131,8 @@ pub fn encode_basis(
     let ktx2 = if fixes.is_empty() {
         plain
     } else {
-        file.to_ktx2(format, width, height, &fixes).map_err(invalid)?
+        file.to_ktx2(format, width, height, &fixes)
+            .map_err(invalid)?
     };
     let t = transcode_basis(&ktx2).map_err(invalid)?;
     let decoded = decode_blocks(t.format, width, height, &t.blocks)?;
@@ -213,8 +214,13 @@ fn le(b: &[u8], o: usize, n: usize) -> Result<u64, String> {
 }
 
 fn slice<'a>(b: &'a [u8], o: u64, n: u64, what: &str) -> Result<&'a [u8], String> {
-    b.get(o as usize..(o + n) as usize)
-        .ok_or_else(|| format!(".basis {what} at {o}..{} beyond its {} bytes", o + n, b.len()))
+    b.get(o as usize..(o + n) as usize).ok_or_else(|| {
+        format!(
+            ".basis {what} at {o}..{} beyond its {} bytes",
+            o + n,
+            b.len()
+        )
+    })
 }
 
 impl<'a> BasisFile<'a> {
@@ -360,7 +366,10 @@ fn basis_dfd(format: BasisFormat, alpha: bool) -> Vec<u8> {
     let (model, samples): (u8, Vec<(u16, u8, u8)>) = match format {
         BasisFormat::Etc1s if alpha => (KHR_DF_MODEL_ETC1S, vec![(0, 63, 0), (64, 63, 15)]),
         BasisFormat::Etc1s => (KHR_DF_MODEL_ETC1S, vec![(0, 63, 0)]),
-        BasisFormat::Uastc => (KHR_DF_MODEL_UASTC, vec![(0, 127, if alpha { 3 } else { 4 })]),
+        BasisFormat::Uastc => (
+            KHR_DF_MODEL_UASTC,
+            vec![(0, 127, if alpha { 3 } else { 4 })],
+        ),
     };
     let block_size = 24 + 16 * samples.len() as u32;
     let mut d = Vec::new();
@@ -541,12 +550,13 @@ pub fn transcode_basis(bytes: &[u8]) -> Result<TranscodedBasis, Ktx2Error> {
         let a = &mut rgba[4 * i as usize + 3];
         *a = if *a >= 128 { 0 } else { 255 };
     }
-    let fixed_blocks = make_alpha_exact(format, width, height, &rgba, &mut blocks).map_err(|e| {
-        Ktx2Error::BadLevel {
-            level: 0,
-            reason: e.to_string(),
-        }
-    })?;
+    let fixed_blocks =
+        make_alpha_exact(format, width, height, &rgba, &mut blocks).map_err(|e| {
+            Ktx2Error::BadLevel {
+                level: 0,
+                reason: e.to_string(),
+            }
+        })?;
     Ok(TranscodedBasis {
         source: info.format,
         format,
@@ -556,4 +566,212 @@ pub fn transcode_basis(bytes: &[u8]) -> Result<TranscodedBasis, Ktx2Error> {
         alpha_fixes: info.alpha_fixes.len() as u64,
         fixed_blocks,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hand-built macro-texture: smooth gradients, a second colour region, binary alpha with
+    /// holes and ragged edges (alpha values next to 128 on both sides), a transparent margin.
+    fn image(w: u32, h: u32) -> Vec<u8> {
+        let mut rgba = vec![0u8; 4 * (w * h) as usize];
+        for (i, p) in rgba.chunks_exact_mut(4).enumerate() {
+            let (x, y) = (i as u32 % w, i as u32 / w);
+            let inside = x >= 4 && y >= 4 && x < w - 4 && y < h - 4;
+            let hole = (x / 3 + y / 2) % 5 == 0 || (x * 7 + y * 3) % 11 == 0;
+            let a = match (inside && !hole, (x + y) % 2) {
+                (true, 0) => 128,
+                (true, _) => 255,
+                (false, 0) => 127,
+                (false, _) => 0,
+            };
+            let c = if x < w / 2 {
+                [(x * 255 / w) as u8, (y * 255 / h) as u8, 90]
+            } else {
+                [200, 40 + (y % 8) as u8, 60]
+            };
+            p.copy_from_slice(&[c[0], c[1], c[2], a]);
+        }
+        rgba
+    }
+
+    fn worst_colour_error(a: &[u8], b: &[u8]) -> (i32, f64) {
+        let (mut max, mut sq, mut n) = (0, 0.0, 0u64);
+        for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+            if p[3] >= 128 {
+                for c in 0..3 {
+                    let d = (p[c] as i32 - q[c] as i32).abs();
+                    max = max.max(d);
+                    sq += (d * d) as f64;
+                    n += 1;
+                }
+            }
+        }
+        (max, (sq / n as f64).sqrt())
+    }
+
+    #[test]
+    fn round_trip_keeps_every_texels_alpha_and_the_colours_within_the_formats_error() {
+        let (w, h) = (64u32, 48u32);
+        let src = image(w, h);
+        // (format, largest and RMS colour error allowed): ETC1S codes a block with one colour
+        // and four intensity offsets out of shared codebooks (5-bit colours), UASTC about as BC7
+        for (format, max_err, rms_err) in
+            [(BasisFormat::Etc1s, 32, 8.0), (BasisFormat::Uastc, 16, 4.0)]
+        {
+            let (ktx2, stats) = encode_basis(format, w, h, &src).unwrap();
+            assert_eq!(stats.bytes, ktx2.len() as u64);
+            let t = transcode_basis(&ktx2).unwrap();
+            assert_eq!((t.source, t.width, t.height), (format, w, h));
+            assert_eq!(t.format, format.runtime_block());
+            assert_eq!(t.blocks.len(), t.format.image_bytes(w, h));
+            assert_eq!(stats.block_bytes, t.blocks.len() as u64);
+            let dec = decode_blocks(t.format, w, h, &t.blocks).unwrap();
+            for (i, (p, q)) in src.chunks_exact(4).zip(dec.chunks_exact(4)).enumerate() {
+                assert_eq!(
+                    p[3] >= 128,
+                    q[3] >= 128,
+                    "{format:?} texel {i}: {p:?} {q:?}"
+                );
+            }
+            let (max, rms) = worst_colour_error(&src, &dec);
+            eprintln!(
+                "{format:?}: {} bytes, colour error max {max}, RMS {rms:.2}, {} alpha fixes, {} blocks re-encoded",
+                ktx2.len(),
+                stats.alpha_fixes,
+                t.fixed_blocks
+            );
+            assert!(max <= max_err && rms <= rms_err, "{format:?}: {max} {rms}");
+        }
+    }
+
+    #[test]
+    fn the_ktx2_crate_reads_the_basis_files_lemi_writes() {
+        let (w, h) = (32u32, 16u32);
+        for (format, scheme, model) in [
+            (
+                BasisFormat::Etc1s,
+                ktx2::SupercompressionScheme::BasisLZ,
+                ktx2::ColorModel::ETC1S,
+            ),
+            (
+                BasisFormat::Uastc,
+                ktx2::SupercompressionScheme::Zstandard,
+                ktx2::ColorModel::UASTC,
+            ),
+        ] {
+            let (file, _) = encode_basis(format, w, h, &image(w, h)).unwrap();
+            let r = ktx2::Reader::new(&file[..]).expect("ktx2 crate reads the file");
+            let hd = r.header();
+            assert_eq!(hd.format, None, "{format:?}: VK_FORMAT_UNDEFINED");
+            assert_eq!((hd.pixel_width, hd.pixel_height, hd.pixel_depth), (w, h, 0));
+            assert_eq!((hd.face_count, hd.level_count, hd.layer_count), (1, 1, 0));
+            assert_eq!(hd.supercompression_scheme, Some(scheme));
+            assert_eq!(r.color_model(), Some(model));
+            assert_eq!(r.transfer_function(), Some(ktx2::TransferFunction::SRGB));
+            assert_eq!(r.writer(), Some("lemi\0"));
+            assert_eq!(r.levels().count(), 1);
+            if format == BasisFormat::Etc1s {
+                assert!(!r.supercompression_global_data().is_empty());
+            }
+        }
+    }
+
+    /// The KTX2 rewrite is bit-exact: the reference C++ transcoder reading the encoder's `.basis`
+    /// and the pure-Rust transcoder reading lemi's KTX2 give the same texels.
+    #[test]
+    fn ktx2_transcodes_to_the_texels_the_reference_transcoder_reads_from_the_basis_file() {
+        use basis_universal::{TranscodeParameters, Transcoder, TranscoderTextureFormat};
+        let (w, h) = (64u32, 32u32);
+        let src = prepare_image(w, h, &image(w, h)).unwrap();
+        for format in [BasisFormat::Etc1s, BasisFormat::Uastc] {
+            let basis = run_encoder(format, w, h, &src).unwrap();
+            let ktx2 = BasisFile::parse(&basis)
+                .unwrap()
+                .to_ktx2(format, w, h, &[])
+                .unwrap();
+            let mut reference = Transcoder::new();
+            reference.prepare_transcoding(&basis).unwrap();
+            let expected = reference
+                .transcode_image_level(
+                    &basis,
+                    TranscoderTextureFormat::RGBA32,
+                    TranscodeParameters {
+                        image_index: 0,
+                        level_index: 0,
+                        decode_flags: None,
+                        output_row_pitch_in_blocks_or_pixels: None,
+                        output_rows_in_pixels: None,
+                    },
+                )
+                .unwrap();
+            let got = transcode_level(&ktx2, basisu::TargetFormat::Rgba32).unwrap();
+            assert_eq!(got.len(), expected.len(), "{format:?}");
+            assert!(got == expected, "{format:?}: texels differ");
+        }
+    }
+
+    #[test]
+    fn alpha_fixes_flip_exactly_the_listed_texels() {
+        let (w, h) = (16u32, 16u32);
+        let src = prepare_image(w, h, &image(w, h)).unwrap();
+        let basis = run_encoder(BasisFormat::Etc1s, w, h, &src).unwrap();
+        let file = BasisFile::parse(&basis).unwrap();
+        let plain = transcode_basis(&file.to_ktx2(BasisFormat::Etc1s, w, h, &[]).unwrap()).unwrap();
+        let fixes = [0u32, 17, 255];
+        let fixed = file.to_ktx2(BasisFormat::Etc1s, w, h, &fixes).unwrap();
+        assert_eq!(read_basis_ktx2(&fixed).unwrap().alpha_fixes, fixes);
+        let fixed = transcode_basis(&fixed).unwrap();
+        let (a, b) = (
+            decode_blocks(plain.format, w, h, &plain.blocks).unwrap(),
+            decode_blocks(fixed.format, w, h, &fixed.blocks).unwrap(),
+        );
+        for i in 0..(w * h) as usize {
+            let flipped = (a[4 * i + 3] >= 128) != (b[4 * i + 3] >= 128);
+            assert_eq!(flipped, fixes.contains(&(i as u32)), "texel {i}");
+        }
+        // a fix naming a texel outside the image is an error, not a panic
+        let bad = file.to_ktx2(BasisFormat::Etc1s, w, h, &[w * h]).unwrap();
+        let e = transcode_basis(&bad).unwrap_err().to_string();
+        assert!(e.contains(ALPHA_FIXES_KEY), "{e}");
+    }
+
+    #[test]
+    fn damaged_or_truncated_files_are_errors_not_panics() {
+        let (w, h) = (32u32, 32u32);
+        for format in [BasisFormat::Etc1s, BasisFormat::Uastc] {
+            let (file, _) = encode_basis(format, w, h, &image(w, h)).unwrap();
+            for len in [0, 11, 12, 40, 80, file.len() / 2, file.len() - 1] {
+                assert!(
+                    transcode_basis(&file[..len]).is_err(),
+                    "{format:?} truncated to {len} bytes"
+                );
+            }
+            // every byte of the header, index and descriptors, and a sample of the data, flipped:
+            // an error or some image, never a panic
+            let mut errors = 0;
+            for i in (0..file.len()).step_by(if file.len() > 400 { 7 } else { 1 }) {
+                let mut d = file.clone();
+                d[i] ^= 0x5A;
+                errors += transcode_basis(&d).is_err() as u32;
+            }
+            assert!(errors > 0, "{format:?}");
+            let e = read_basis_ktx2(b"not a texture at all").unwrap_err();
+            assert_eq!(e, Ktx2Error::BadIdentifier);
+        }
+        // a block-format file is not a Basis file
+        let bc1 = super::super::ktx2_container::write_ktx2(
+            BlockFormat::Bc1,
+            4,
+            4,
+            &[vec![0u8; 8]],
+            super::super::Supercompression::None,
+        )
+        .unwrap();
+        assert!(matches!(
+            read_basis_ktx2(&bc1),
+            Err(Ktx2Error::UnsupportedFormat(_))
+        ));
+    }
 }

@@ -277,7 +277,11 @@ pub(crate) fn assemble(l: &Layout) -> Vec<u8> {
     ] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    let sgd_at = if l.global_data.is_empty() { 0 } else { sgd_offset };
+    let sgd_at = if l.global_data.is_empty() {
+        0
+    } else {
+        sgd_offset
+    };
     out.extend_from_slice(&(sgd_at as u64).to_le_bytes()); // sgdByteOffset
     out.extend_from_slice(&(l.global_data.len() as u64).to_le_bytes()); // sgdByteLength
     for lv in 0..n {

@@ -33,8 +33,8 @@ pub use basis_universal::{
     TranscodedBasis,
 };
 pub use block_compression::{
-    analyze_blocks, decode_blocks, encode_blocks, make_alpha_exact, BlockEncodeStats, BlockFormat, BlockQuality,
-    TextureFormat,
+    analyze_blocks, decode_blocks, encode_blocks, make_alpha_exact, BlockEncodeStats, BlockFormat,
+    BlockQuality, TextureFormat,
 };
 pub use gap_fill::{
     close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
