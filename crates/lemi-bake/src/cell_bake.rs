@@ -358,6 +358,8 @@ impl<'a> Baker<'a> {
                 stats,
                 hlod: None,
                 object: None,
+                // block formats: stored as version 7, their quads' places derived on reading
+                packing: format.block().map(|_| options.packing),
             },
             near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
             macro_blobs,
@@ -413,6 +415,7 @@ impl<'a> Baker<'a> {
                 hlod: Some(hlod),
                 object: None,
                 texture_format: Default::default(),
+                packing: None,
             },
             near: near.iter().map(|r| [r.mesh, r.tri]).collect(),
             macro_blobs: Vec::new(),

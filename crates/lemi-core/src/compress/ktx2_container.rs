@@ -284,12 +284,8 @@ pub(crate) fn assemble(l: &Layout) -> Vec<u8> {
     };
     out.extend_from_slice(&(sgd_at as u64).to_le_bytes()); // sgdByteOffset
     out.extend_from_slice(&(l.global_data.len() as u64).to_le_bytes()); // sgdByteLength
-    for lv in 0..n {
-        for v in [
-            offsets[lv] as u64,
-            l.levels[lv].len() as u64,
-            l.raw_lengths[lv],
-        ] {
+    for ((offset, level), raw) in offsets.iter().zip(l.levels).zip(l.raw_lengths) {
+        for v in [*offset as u64, level.len() as u64, *raw] {
             out.extend_from_slice(&v.to_le_bytes());
         }
     }

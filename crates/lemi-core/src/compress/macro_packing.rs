@@ -33,7 +33,7 @@ use super::micro_textures::MicroTexture;
 use super::CompressError;
 
 /// Parameters of macro-texture packing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct PackingOptions {
     /// Largest macro-texture side (a power of two; GPUs guarantee 2048 on downlevel, 8192 usually).
     pub max_size: u32,
