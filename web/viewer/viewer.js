@@ -27,7 +27,8 @@ import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 // the decoder of EXT_meshopt_compression, which `lemi export` compresses vertices and indices with
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 // `lemi export --textures ktx2`: the bundle's BC7/BC1 blocks in KTX2 (Zstandard supercompressed),
-// uploaded as they are where WebGL has the format (no Basis transcoder is involved)
+// uploaded as they are where WebGL has the format; an ETC1S or UASTC bundle's Basis Universal
+// KTX2 files are transcoded in the browser (to BC7 or BC3 here)
 import { KTX2Loader } from 'three/addons/loaders/KTX2Loader.js';
 import { predict, locate, cellId } from './predict.js';
 
@@ -182,6 +183,8 @@ const BLOCK_EXTENSIONS = new Map([
   [THREE.RGBA_S3TC_DXT1_Format, ['BC1', 'WEBGL_compressed_texture_s3tc']],
   [THREE.RGB_S3TC_DXT1_Format, ['BC1', 'WEBGL_compressed_texture_s3tc']],
   [THREE.RGBA_BPTC_Format, ['BC7', 'EXT_texture_compression_bptc']],
+  // what three.js transcodes Basis Universal (ETC1S, UASTC) to where BC7 is missing
+  [THREE.RGBA_S3TC_DXT5_Format, ['BC3', 'WEBGL_compressed_texture_s3tc']],
 ]);
 
 // A block-compressed macro-texture this browser cannot sample is a clear error, not a black cell.
@@ -460,7 +463,9 @@ async function main() {
   const loader = new GLTFLoader();
   loader.setMeshoptDecoder(MeshoptDecoder);
   glExtensions = renderer.extensions;
-  loader.setKTX2Loader(new KTX2Loader().detectSupport(renderer));
+  // Basis Universal (ETC1S, UASTC) textures are transcoded by Binomial's transcoder, vendored
+  loader.setKTX2Loader(
+    new KTX2Loader().setTranscoderPath('./vendor/three/examples/jsm/libs/basis/').detectSupport(renderer));
   const cells = new Map(); // id → {state, group, bytes, info, lastWanted}
   let inFlight = 0;
 

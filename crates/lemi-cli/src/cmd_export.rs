@@ -21,9 +21,9 @@ pub struct Args {
     /// Only these cells, as grid coordinates `x_y_z` (comma-separated); default: every baked cell.
     #[arg(long, value_delimiter = ',')]
     pub cells: Vec<String>,
-    /// Texture format of the exported files: png (core glTF 2.0) or ktx2 (the bundle's
-    /// block-compressed KTX2 files through KHR_texture_basisu; bundles baked with
-    /// --texture-format bc7 or bc1).
+    /// Texture format of the exported files: png (core glTF 2.0) or ktx2 (the bundle's KTX2
+    /// files through KHR_texture_basisu; bundles baked with --texture-format bc7, bc1, uastc or
+    /// etc1s).
     #[arg(long, value_enum, default_value = "png")]
     pub textures: TexturesArg,
     /// How vertex and index data are stored: meshopt (compressed with EXT_meshopt_compression,

@@ -27,7 +27,8 @@ pub struct Args {
     pub no_near: bool,
     /// Texture format of the exported cells: png (decoded, any browser) or ktx2 (a bundle baked
     /// with --texture-format bc7 or bc1: its blocks as stored, for browsers whose WebGL has
-    /// the format, e.g. desktop browsers with S3TC for BC1 and BPTC for BC7).
+    /// the format, e.g. desktop browsers with S3TC for BC1 and BPTC for BC7; uastc or etc1s:
+    /// its Basis Universal files, transcoded by the browser).
     #[arg(long, value_enum, default_value = "png")]
     pub textures: crate::cmd_export::TexturesArg,
     /// The scene to use instead of the bundle manifest's sources (checked against its fingerprint).

@@ -10,7 +10,7 @@ use anyhow::{bail, Context};
 const VIEWER_FILES: [&str; 3] = ["index.html", "viewer.js", "predict.js"];
 
 /// The files of the three.js package the viewer imports, relative to `node_modules/three`.
-const THREE_FILES: [&str; 12] = [
+const THREE_FILES: [&str; 14] = [
     "LICENSE",
     "build/three.module.js",
     "build/three.core.js",
@@ -20,8 +20,11 @@ const THREE_FILES: [&str; 12] = [
     "examples/jsm/utils/BufferGeometryUtils.js",
     "examples/jsm/utils/SkeletonUtils.js",
     // KTX2 textures (`--textures ktx2`): the container reader and the Zstandard decoder
-    // (WebAssembly inside the module); BC blocks need no Basis transcoder
+    // (WebAssembly inside the module); BC blocks need no Basis transcoder, ETC1S and UASTC
+    // bundles' textures go through Binomial's transcoder (Apache-2.0, as three.js ships it)
     "examples/jsm/loaders/KTX2Loader.js",
+    "examples/jsm/libs/basis/basis_transcoder.js",
+    "examples/jsm/libs/basis/basis_transcoder.wasm",
     "examples/jsm/libs/ktx-parse.module.js",
     "examples/jsm/libs/zstddec.module.js",
     "examples/jsm/utils/WorkerPool.js",

@@ -435,7 +435,7 @@ fn macro_images(
             .map(|b| (b.clone(), "image/ktx2"))
             .collect()),
         (ExportTextures::Ktx2, _) => Err(ExportError::Unsupported(
-            "--textures ktx2 needs a bundle baked with --texture-format bc7 or bc1 (this one stores PNG)".into(),
+            "--textures ktx2 needs a bundle baked with --texture-format bc7, bc1, uastc or etc1s (this one stores PNG)".into(),
         )),
     }
 }

@@ -28,7 +28,8 @@ pub enum ExportTextures {
     /// decoded and stored as PNG).
     #[default]
     Png,
-    /// The bundle's KTX2 files through `KHR_texture_basisu` (block-compressed bundles only).
+    /// The bundle's KTX2 files through `KHR_texture_basisu` (block-compressed and Basis Universal
+    /// bundles only).
     Ktx2,
 }
 

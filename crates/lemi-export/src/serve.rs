@@ -134,6 +134,7 @@ fn content_type(path: &Path) -> &'static str {
         "glb" => "model/gltf-binary",
         "png" => "image/png",
         "ktx2" => "image/ktx2",
+        "wasm" => "application/wasm",
         "css" => "text/css",
         _ => "application/octet-stream",
     }

@@ -1882,6 +1882,43 @@ mod tests {
         }
     }
 
+    /// Version 7 cells store no macro-texture places: the reader derives them with the packer, so
+    /// the packer's placements are part of the format. This pins them on a fixed input; if a
+    /// change to `pack_rects` fails it, version 7 cells would read wrong: keep the old packer for
+    /// them and write a new version.
+    #[test]
+    fn the_packers_placements_are_pinned_by_version_7() {
+        let sizes: Vec<(u32, u32)> = (0..3000u32)
+            .map(|i| (1 + i * 7 % 37, 1 + i * 11 % 29))
+            .collect();
+        let mut hasher = blake3::Hasher::new();
+        for (block, trim) in [(4, true), (4, false), (1, true)] {
+            let p = pack_rects(
+                &sizes,
+                &PackingOptions {
+                    max_size: 1024,
+                    block,
+                    trim,
+                },
+            )
+            .unwrap();
+            for (w, h) in &p.macro_sizes {
+                hasher.update(&w.to_le_bytes());
+                hasher.update(&h.to_le_bytes());
+            }
+            for q in &p.placements {
+                hasher.update(&q.macro_index.to_le_bytes());
+                hasher.update(&q.x.to_le_bytes());
+                hasher.update(&q.y.to_le_bytes());
+                hasher.update(&[q.rotated as u8]);
+            }
+        }
+        assert_eq!(
+            hasher.finalize().to_hex().as_str(),
+            "f0cadab8b5b979ce0fc1dd4af5eda41a33a48a52c768bd65dea70f53de3b32bb"
+        );
+    }
+
     #[test]
     fn packed_quads_are_smaller_and_must_lie_where_the_packing_puts_them() {
         let rects: Vec<_> = (0..2000u16)
