@@ -1216,12 +1216,12 @@ fn encode_quad_columns(quads: &[Quad]) -> Result<Vec<u8>, ContainerError> {
 }
 
 /// `quads.bin` of version 7: what the packing cannot derive, as columns of the quads in their
-/// order: the count (`u32`), every face (`u8`), then the layer, `x0`, `y0` (each as the difference
-/// to the previous quad's, which restarts from 0 when the face or layer changes), width and
-/// height, each zigzag-coded into three byte planes (low bytes of all quads, then middle, then
+/// order: the count (`u32`), every face (`u8`), then the layer (as the difference to the previous
+/// quad's), `x0` and `y0` (as the differences to the previous quad's `x1` and `y0`, both counting
+/// as 0 when the face or layer changes), width and height, each zigzag-coded into three byte planes (low bytes of all quads, then middle, then
 /// high), Zstandard-compressed. Rotation, macro-texture and place are those
 /// [`crate::compress::pack_rects`] gives the quads' sizes with `packing`; the writer checks that
-/// they are the quads' (an error otherwise). On a `builtin:city:1M` cell (14.8 k quads) 34 KB
+/// they are the quads' (an error otherwise). On a `builtin:city:1M` cell (14.8 k quads) 31 KB
 /// against the 66 KB of version 5's columns.
 fn encode_packed_quads(
     quads: &[Quad],
@@ -1244,6 +1244,8 @@ fn encode_packed_quads(
     raw.extend_from_slice(&(n as u32).to_le_bytes());
     raw.extend(quads.iter().map(|q| q.face as u8));
     let mut columns: [Vec<u32>; 5] = Default::default();
+    // (face, layer, x1, y0) of the previous quad: x0 is coded against its x1 (the extraction
+    // goes along rows, so a quad often starts where the previous one ends), y0 against its y0
     let mut prev: Option<(Face, u16, i64, i64)> = None;
     let mut prev_layer = 0i64;
     for q in quads {
@@ -1260,7 +1262,7 @@ fn encode_packed_quads(
         {
             c.push(zigzag(v));
         }
-        prev = Some((q.face, q.layer, x0, y0));
+        prev = Some((q.face, q.layer, x1, y0));
         prev_layer = layer;
     }
     for c in &columns {
@@ -1334,7 +1336,7 @@ fn decode_packed_quads(raw: &[u8], header: &CellHeader) -> Result<Vec<u8>, Conta
                 "quad {i}: layer {layer}, texels {x0},{y0}..{x1},{y1} out of range"
             )));
         }
-        prev = Some((faces[i], layer, x0, y0));
+        prev = Some((faces[i], layer, x1, y0));
         texels.push([x0, y0, x1, y1].map(|v| v as u16));
         let r = &mut records[i * QUAD_RECORD_BYTES..(i + 1) * QUAD_RECORD_BYTES];
         r[0] = faces[i];
