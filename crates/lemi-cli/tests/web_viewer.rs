@@ -275,12 +275,26 @@ fn the_browser_shows_what_lemi_renders() {
 /// `lemi render` shows from the same blocks (lavapipe samples BC1 too).
 #[test]
 fn the_browser_shows_a_bc1_bake_from_its_ktx2_blocks() {
+    browser_shows_ktx2("bc1", &["BC1"]);
+}
+
+/// An ETC1S bake served with its Basis Universal KTX2 files (`KHR_texture_basisu`): three.js
+/// transcodes them in the page with the vendored Basis transcoder (to BC7 or BC3 here), and the
+/// picture covers what `lemi render` covers (lemi transcodes the same files to BC1).
+#[test]
+fn the_browser_shows_an_etc1s_bake_through_the_basis_transcoder() {
+    browser_shows_ktx2("etc1s", &["BC7", "BC3"]);
+}
+
+/// `format`'s bake through `lemi serve --textures ktx2` in the browser, against `lemi render`;
+/// `uploaded` lists the block formats the page may upload.
+fn browser_shows_ktx2(format: &str, uploaded: &[&str]) {
     let Some(web) = browser_tools() else { return };
-    let d = tmp("web", "ktx2");
+    let d = tmp("web", &format!("ktx2-{format}"));
     let bundle = d.join("b");
     let mut args = vec!["bake"];
     args.extend(SMALL);
-    args.extend(["--texture-format", "bc1", "-o", bundle.to_str().unwrap()]);
+    args.extend(["--texture-format", format, "-o", bundle.to_str().unwrap()]);
     let o = lemi(&args);
     assert!(o.status.success(), "bake: {}", stderr(&o));
     let site = d.join("site");
@@ -311,20 +325,27 @@ fn the_browser_shows_a_bc1_bake_from_its_ktx2_blocks() {
     };
     if !ok {
         let error = v["error"].as_str().unwrap_or_default();
-        // a browser without BC1 sampling gets the viewer's clear message, nothing else
+        // a browser without the block format gets the viewer's clear message, nothing else
         assert!(
             error.contains("which this browser lacks"),
             "the viewer failed: {v}"
         );
-        lemi_testkit::skip(&format!("this browser cannot sample BC1: {error}"));
+        lemi_testkit::skip(&format!("this browser cannot sample {format}: {error}"));
         return;
     }
-    // the blocks were uploaded as they are, not decoded
-    assert_eq!(v["texture_formats"], serde_json::json!(["BC1"]), "{v}");
+    // the blocks were uploaded in a block format, not decoded to RGBA8
+    let got = v["texture_formats"].as_array().cloned().unwrap_or_default();
+    assert!(
+        !got.is_empty()
+            && got
+                .iter()
+                .all(|f| uploaded.contains(&f.as_str().unwrap_or(""))),
+        "{format}: {v}"
+    );
     let reference = d.join("ktx2-lemi.png");
     render(&bundle, eye, dir, fov_y, (w, h), &reference);
     let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
-    eprintln!("ktx2: {note} ({})", v["renderer"]);
+    eprintln!("ktx2 {format}: {note} ({})", v["renderer"]);
     assert!(agreement >= 0.99, "coverage agreement {agreement}");
     assert!(flip < FLIP_BOUND, "mean FLIP {flip} ≥ {FLIP_BOUND}");
     // `--textures` on an export directory is a clear error (the textures are chosen at export)
