@@ -11,7 +11,9 @@ use std::path::Path;
 
 use import_common::*;
 use lemi_core::bundle::CELL_MAGIC;
-use lemi_core::compress::{encode_blocks, write_ktx2, BlockFormat, Supercompression};
+use lemi_core::compress::{
+    encode_basis, encode_blocks, write_ktx2, BasisFormat, BlockFormat, Supercompression,
+};
 use lemi_core::container::{self, Blob};
 
 fn put(target: &str, name: &str, bytes: &[u8]) {
@@ -128,6 +130,14 @@ f 1 3 4\nl 1 2\n",
             let file = write_ktx2(format, 8, 8, &levels, scheme).expect("ktx2");
             put("ktx2", &format!("{name}_{tag}.ktx2"), &file);
         }
+    }
+
+    // Basis Universal: ETC1S (BasisLZ) and UASTC (Zstandard) of the same 8×8 image, as `etc1s` and
+    // `uastc` cells store them
+    for format in [BasisFormat::Etc1s, BasisFormat::Uastc] {
+        let (file, _) = encode_basis(format, 8, 8, &rgba).expect("basis");
+        let name = format!("{format:?}").to_lowercase();
+        put("ktx2", &format!("{name}.ktx2"), &file);
     }
 
     // Camera paths: the format's example, and one with a full turn and unknown fields.

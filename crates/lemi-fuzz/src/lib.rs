@@ -138,13 +138,16 @@ pub fn fuzz_manifest(data: &[u8]) {
 /// A KTX 2.0 macro-texture as a block-compressed cell stores it, read with
 /// [`lemi_core::compress::read_ktx2`] (header, level index, data format descriptor, Zstandard
 /// inflation); a file that reads has its first level decoded to RGBA, as the runtime does where
-/// the adapter lacks the block format.
+/// the adapter lacks the block format. The same bytes as a Basis Universal macro-texture (an
+/// `etc1s` or `uastc` cell's): [`lemi_core::compress::transcode_basis`] (header, descriptor,
+/// alpha fixes, the transcoder, the alpha-exact re-encoding).
 pub fn fuzz_ktx2(data: &[u8]) {
     if let Ok(t) = lemi_core::compress::read_ktx2(data) {
         if let Some(level) = t.levels.first() {
             let _ = lemi_core::compress::decode_blocks(t.format, t.width, t.height, level);
         }
     }
+    let _ = lemi_core::compress::transcode_basis(data);
 }
 
 /// A camera path (`lemi-path` JSON) read with [`lemi_walk::CameraPath::read`]; a path that reads is sampled

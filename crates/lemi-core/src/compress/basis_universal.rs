@@ -428,6 +428,11 @@ pub fn read_basis_ktx2(bytes: &[u8]) -> Result<BasisKtx2, Ktx2Error> {
             "a {width}×{height}×{depth} texture of {layers} layers, {faces} faces and {levels} levels (lemi stores one 2D level)"
         ));
     }
+    if width % 4 != 0 || height % 4 != 0 {
+        return bad(format!(
+            "a {width}×{height} Basis Universal macro-texture (sides must be multiples of 4)"
+        ));
+    }
     let (dfd_off, dfd_len) = (u32_at(bytes, 48)? as usize, u32_at(bytes, 52)? as usize);
     let dfd = bytes
         .get(dfd_off..dfd_off.saturating_add(dfd_len))
@@ -447,6 +452,36 @@ pub fn read_basis_ktx2(bytes: &[u8]) -> Result<BasisKtx2, Ktx2Error> {
             )))
         }
     };
+    // the level and the global data lie inside the file, and the level's inflated size is what
+    // the texture's blocks take (the transcoder allocates what the index says)
+    let u64_at = |o: usize| -> Result<u64, Ktx2Error> {
+        Ok(u32_at(bytes, o)? as u64 | (u32_at(bytes, o + 4)? as u64) << 32)
+    };
+    let inside = |off: u64, len: u64, what: &str| -> Result<(), Ktx2Error> {
+        match off.checked_add(len) {
+            Some(end) if end <= bytes.len() as u64 => Ok(()),
+            _ => Err(Ktx2Error::Truncated(format!(
+                "{what} at {off}..+{len} beyond the end of the {} bytes",
+                bytes.len()
+            ))),
+        }
+    };
+    let (level_off, level_len, level_raw) = (u64_at(80)?, u64_at(88)?, u64_at(96)?);
+    inside(level_off, level_len, "level 0")?;
+    inside(u64_at(64)?, u64_at(72)?, "the supercompression global data")?;
+    let blocks_bytes = (width as u64 / 4) * (height as u64 / 4) * 16;
+    let raw_ok = match format {
+        BasisFormat::Etc1s => level_raw == 0,
+        BasisFormat::Uastc => level_raw == blocks_bytes,
+    };
+    if level_len == 0 || !raw_ok {
+        return Err(Ktx2Error::BadLevel {
+            level: 0,
+            reason: format!(
+                "{level_len} bytes inflating to {level_raw} for a {width}×{height} {format:?} texture"
+            ),
+        });
+    }
     if dfd[14] != KHR_DF_TRANSFER_SRGB {
         return Err(Ktx2Error::BadDfd(format!(
             "transfer function {} (lemi's macro-textures are sRGB, 2)",
@@ -757,6 +792,13 @@ mod tests {
                 errors += transcode_basis(&d).is_err() as u32;
             }
             assert!(errors > 0, "{format:?}");
+            // a level index claiming an absurd inflated size (the transcoder would allocate it)
+            let mut d = file.clone();
+            d[96..104].copy_from_slice(&(1u64 << 56).to_le_bytes());
+            assert!(matches!(
+                read_basis_ktx2(&d),
+                Err(Ktx2Error::BadLevel { .. })
+            ));
             let e = read_basis_ktx2(b"not a texture at all").unwrap_err();
             assert_eq!(e, Ktx2Error::BadIdentifier);
         }
