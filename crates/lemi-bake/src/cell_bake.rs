@@ -33,8 +33,8 @@ use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
     compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, CompressError,
-    CompressOptions, FaceLayers, MicroTextureOptions, PackingOptions, Supercompression,
-    TextureFormat,
+    CompressOptions, FaceLayers, MacroTexture, MicroTextureOptions, PackingOptions,
+    Supercompression, TextureFormat,
 };
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;
@@ -246,40 +246,25 @@ impl<'a> Baker<'a> {
                     .map_err(encode_err)?,
                 0,
             ),
-            Some(_) if format.basis().is_some() => {
-                let basis = format.basis().expect("checked by the guard");
-                // one macro-texture at a time: the encoder runs its own threads
-                let encoded: Vec<(Vec<u8>, u64)> = compressed
-                    .macro_textures
-                    .iter()
-                    .map(|m| {
-                        encode_basis(basis, m.width, m.height, &m.rgba)
-                            .map(|(ktx2, stats)| (ktx2, stats.block_bytes))
-                    })
-                    .collect::<Result<_, lemi_core::compress::CompressError>>()
-                    .map_err(|source| BakeError::Compress {
-                        cell: cell.id(),
-                        source,
-                    })?;
-                let bytes = encoded.iter().map(|e| e.1).sum();
-                (encoded.into_iter().map(|e| e.0).collect(), bytes)
-            }
             Some(block) => {
-                let encoded: Vec<(Vec<u8>, u64)> = compressed
-                    .macro_textures
-                    .par_iter()
-                    .map(|m| {
-                        let (blocks, stats) = encode_blocks(block, m.width, m.height, &m.rgba)?;
-                        let ktx2 =
-                            write_ktx2(block, m.width, m.height, &[blocks], Supercompression::Zstd)
-                                .map_err(|e| CompressError::Invalid(e.to_string()))?;
-                        Ok((ktx2, stats.bytes))
-                    })
-                    .collect::<Result<_, lemi_core::compress::CompressError>>()
-                    .map_err(|source| BakeError::Compress {
-                        cell: cell.id(),
-                        source,
-                    })?;
+                let encode = |m: &MacroTexture| -> Result<(Vec<u8>, u64), CompressError> {
+                    if let Some(basis) = format.basis() {
+                        let (ktx2, stats) = encode_basis(basis, m.width, m.height, &m.rgba)?;
+                        return Ok((ktx2, stats.block_bytes));
+                    }
+                    let (blocks, stats) = encode_blocks(block, m.width, m.height, &m.rgba)?;
+                    let ktx2 =
+                        write_ktx2(block, m.width, m.height, &[blocks], Supercompression::Zstd)
+                            .map_err(|e| CompressError::Invalid(e.to_string()))?;
+                    Ok((ktx2, stats.bytes))
+                };
+                // the Basis encoder runs its own threads: one macro-texture at a time
+                let macros = &compressed.macro_textures;
+                let encoded: Result<Vec<(Vec<u8>, u64)>, CompressError> = match format.basis() {
+                    Some(_) => macros.iter().map(encode).collect(),
+                    None => macros.par_iter().map(encode).collect(),
+                };
+                let encoded = encoded.map_err(encode_err)?;
                 let bytes = encoded.iter().map(|e| e.1).sum();
                 (encoded.into_iter().map(|e| e.0).collect(), bytes)
             }

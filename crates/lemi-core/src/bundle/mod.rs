@@ -1072,25 +1072,15 @@ pub struct BlockMacro {
 fn check_basis_ktx2(m: &MacroInfo, format: BasisFormat, blob: &[u8]) -> Result<(), ContainerError> {
     let t =
         read_basis_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
-    if t.format != format || t.width != m.width || t.height != m.height {
-        return Err(ContainerError::Header(format!(
-            "{}: KTX2 of {:?} {}x{}, the header says {} {}x{}",
-            m.name,
-            t.format,
-            t.width,
-            t.height,
-            format.texture_format(),
-            m.width,
-            m.height
-        )));
-    }
-    if m.width % 4 != 0 || m.height % 4 != 0 {
-        return Err(ContainerError::Header(format!(
-            "{}: a Basis Universal macro-texture of {}x{} texels (sides must be multiples of 4)",
-            m.name, m.width, m.height
-        )));
-    }
-    Ok(())
+    let kind = "a Basis Universal";
+    check_macro_entry(
+        m,
+        t.format == format,
+        &t.format,
+        (t.width, t.height),
+        format.texture_format(),
+        kind,
+    )
 }
 
 /// Reads a macro-texture's KTX2 blob and checks it against its header entry and the cell's format.
@@ -1100,25 +1090,41 @@ fn check_ktx2(
     blob: &[u8],
 ) -> Result<Ktx2Texture, ContainerError> {
     let t = read_ktx2(blob).map_err(|e| ContainerError::Header(format!("{}: {e}", m.name)))?;
-    if t.format != format || t.width != m.width || t.height != m.height {
+    let kind = "a block-compressed";
+    check_macro_entry(
+        m,
+        t.format == format,
+        &t.format,
+        (t.width, t.height),
+        format.texture_format(),
+        kind,
+    )?;
+    Ok(t)
+}
+
+/// A KTX2 macro-texture of `stored` format (`same`: the cell's) and `size` against its header
+/// entry `m` and the cell's `expected` format; block sides must be multiples of 4.
+fn check_macro_entry(
+    m: &MacroInfo,
+    same: bool,
+    stored: &dyn std::fmt::Debug,
+    (width, height): (u32, u32),
+    expected: TextureFormat,
+    kind: &str,
+) -> Result<(), ContainerError> {
+    if !same || width != m.width || height != m.height {
         return Err(ContainerError::Header(format!(
-            "{}: KTX2 of {:?} {}x{}, the header says {} {}x{}",
-            m.name,
-            t.format,
-            t.width,
-            t.height,
-            format.texture_format(),
-            m.width,
-            m.height
+            "{}: KTX2 of {stored:?} {width}x{height}, the header says {expected} {}x{}",
+            m.name, m.width, m.height
         )));
     }
     if m.width % 4 != 0 || m.height % 4 != 0 {
         return Err(ContainerError::Header(format!(
-            "{}: a block-compressed macro-texture of {}x{} texels (sides must be multiples of 4)",
+            "{}: {kind} macro-texture of {}x{} texels (sides must be multiples of 4)",
             m.name, m.width, m.height
         )));
     }
-    Ok(t)
+    Ok(())
 }
 
 /// Bytes of one quad record in `quads.bin` (before deflate).
