@@ -264,7 +264,10 @@ impl<'a> Baker<'a> {
                     Some(_) => macros.iter().map(encode).collect(),
                     None => macros.par_iter().map(encode).collect(),
                 };
-                let encoded = encoded.map_err(encode_err)?;
+                let encoded = encoded.map_err(|source| BakeError::Compress {
+                    cell: cell.id(),
+                    source,
+                })?;
                 let bytes = encoded.iter().map(|e| e.1).sum();
                 (encoded.into_iter().map(|e| e.0).collect(), bytes)
             }
