@@ -1931,7 +1931,7 @@ mod tests {
     fn packed_quads_are_smaller_and_must_lie_where_the_packing_puts_them() {
         let rects: Vec<_> = (0..2000u16)
             .map(|i| {
-                let (f, l) = ((i / 1000) as usize, (i / 400 % 3) as u16);
+                let (f, l) = ((i / 1000) as usize, i / 400 % 3);
                 (f, l, i * 7 % 480, i * 13 % 480, 1 + i % 9, 1 + i % 23)
             })
             .collect();
