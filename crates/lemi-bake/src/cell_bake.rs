@@ -346,7 +346,7 @@ impl<'a> Baker<'a> {
                 stats,
                 hlod: None,
                 object: None,
-                // block formats: stored as version 7, their quads' places derived on reading
+                // block formats: stored as version 8, their quads' places and stacks derived on reading
                 packing: format.block().map(|_| options.packing),
             },
             near: class.near.iter().map(|r| [r.mesh, r.tri]).collect(),
@@ -443,6 +443,8 @@ pub fn compress_options(params: &BakeParams) -> CompressOptions {
             },
             // no texture doubled for the few footprints that overflow a power of two
             trim: true,
+            // thin micro-textures of a face share blocks in stacks (version 8 cells)
+            stack: params.texture_format.block().is_some(),
             ..Default::default()
         },
         ..Default::default()

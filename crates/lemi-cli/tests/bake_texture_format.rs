@@ -77,7 +77,7 @@ fn every_texture_format_bakes_and_reports_its_bytes_and_seconds() {
             assert_eq!(m["version"], 2);
         } else {
             assert_eq!(m["params"]["texture_format"], format, "{m}");
-            assert_eq!(m["version"], 7);
+            assert_eq!(m["version"], 8);
         }
         // the text summary says it too
         let o = bake(out.to_str().unwrap(), &["--texture-format", format]);

@@ -57,8 +57,8 @@ fn a_damaged_manifest_is_a_clear_error_at_start_of_walk_and_render() {
         ),
         (
             "an unknown version",
-            // a BC1 bundle (the default texture format) is version 7
-            edited("\"version\": 7", "\"version\": 99"),
+            // a BC1 bundle (the default texture format) is version 8
+            edited("\"version\": 8", "\"version\": 99"),
             "version",
         ),
         (

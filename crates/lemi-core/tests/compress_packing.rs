@@ -3,8 +3,8 @@
 //! copied, rotated ones included).
 
 use lemi_core::compress::{
-    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, MacroPlacement,
-    MicroTexture, Packing, PackingOptions, TexelRect,
+    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, pack_stacked,
+    MacroPlacement, MicroTexture, Packing, PackingOptions, TexelRect,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
@@ -303,6 +303,7 @@ fn block_opts(max_size: u32) -> PackingOptions {
         max_size,
         block: 4,
         trim: true,
+        stack: false,
     }
 }
 
@@ -385,7 +386,7 @@ proptest! {
         block in prop::sample::select(vec![1u32, 4]),
     ) {
         let max = 1 << max_log;
-        let paper = PackingOptions { max_size: max, block, trim: false };
+        let paper = PackingOptions { max_size: max, block, trim: false, stack: false };
         let trimmed = PackingOptions { trim: true, ..paper };
         let b = pack_rects(&sizes, &trimmed).unwrap();
         prop_assert!(analyze_packing(&sizes, &pack_rects(&sizes, &paper).unwrap()).is_ok());
@@ -424,6 +425,7 @@ fn trimmed_packing_uses_fewer_texels_than_powers_of_two() {
             max_size: 4096,
             block,
             trim: false,
+            stack: false,
         };
         let trimmed = PackingOptions {
             trim: true,
@@ -440,5 +442,118 @@ fn trimmed_packing_uses_fewer_texels_than_powers_of_two() {
         let (a, b) = (texels(&paper), texels(&trimmed));
         println!("block {block}: {a} texels in powers of two, {b} trimmed");
         assert!(b < a, "block {block}: {b} trimmed texels against {a}");
+    }
+}
+
+/// Thin bands of a grazing ground plane, one per layer, each a texel or two high and stacked up
+/// the face image (the case stacks are for), plus random rectangles on two faces.
+fn stack_case(seed: u64, n: usize) -> Vec<MicroTexture> {
+    let mut s = seed | 1;
+    let mut rnd = |m: u32| {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s % m as u64) as u32
+    };
+    let mut out = Vec::new();
+    for layer in 0..n as u32 {
+        // even layers: a band one row above the previous one; odd ones: anything
+        let (face, x0, y0, w, h) = if layer % 2 == 0 {
+            (Face::PosX, rnd(20), 200 - layer / 2, 100 + rnd(150), 1)
+        } else {
+            (Face::NegZ, rnd(200), rnd(240), 1 + rnd(30), 1 + rnd(12))
+        };
+        let mut m = micro(w, h, seed ^ layer as u64);
+        m.face = face;
+        m.layer = layer;
+        m.rect = TexelRect {
+            x0,
+            y0,
+            x1: x0 + w,
+            y1: y0 + h,
+        };
+        out.push(m);
+    }
+    out
+}
+
+#[test]
+fn stacks_take_fewer_blocks_for_thin_bands_and_none_without_blocks() {
+    let micros = stack_case(7, 120);
+    let (_, _, plain) = pack_micro_textures(&micros, &block_opts(1024)).unwrap();
+    let stacked_opts = PackingOptions {
+        stack: true,
+        ..block_opts(1024)
+    };
+    let (_, _, stacked) = pack_micro_textures(&micros, &stacked_opts).unwrap();
+    assert!(
+        (stacked.macro_texels as f64) < 0.8 * plain.macro_texels as f64,
+        "{} against {}",
+        stacked.macro_texels,
+        plain.macro_texels
+    );
+    // without blocks there is nothing to share: stacking is off
+    let p1 = pack_stacked(&face_rects(&micros), &opts(1024)).unwrap();
+    let p2 = pack_stacked(
+        &face_rects(&micros),
+        &PackingOptions {
+            stack: true,
+            ..opts(1024)
+        },
+    )
+    .unwrap();
+    assert_eq!(p1, p2);
+    assert_eq!(p1.stacks.len(), micros.len());
+}
+
+fn face_rects(micros: &[MicroTexture]) -> Vec<(u32, TexelRect)> {
+    micros
+        .iter()
+        .map(|m| (m.face.index() as u32, m.rect))
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    /// Stacks hold micro-textures of one face whose rectangles do not overlap; no block holds
+    /// texels of two stacks; every micro-texture's texels are where its placement says (turned
+    /// stacks included), and its rectangle's texels are its own.
+    #[test]
+    fn stacked_packing_keeps_every_micro_textures_texels(seed in 1u64..u64::MAX, n in 1usize..160) {
+        let micros = stack_case(seed, n);
+        let options = PackingOptions { stack: true, ..block_opts(512) };
+        let rects = face_rects(&micros);
+        let p = pack_stacked(&rects, &options).unwrap();
+        let mut seen = vec![false; micros.len()];
+        for s in &p.stacks {
+            for (k, &a) in s.members.iter().enumerate() {
+                prop_assert!(!seen[a]);
+                seen[a] = true;
+                let (fa, ra) = rects[a];
+                prop_assert!(ra.x0 >= s.bbox.x0 && ra.x1 <= s.bbox.x1 && ra.y0 >= s.bbox.y0 && ra.y1 <= s.bbox.y1);
+                for &b in &s.members[k + 1..] {
+                    let (fb, rb) = rects[b];
+                    prop_assert_eq!(fa, fb);
+                    prop_assert!(ra.x1 <= rb.x0 || rb.x1 <= ra.x0 || ra.y1 <= rb.y0 || rb.y1 <= ra.y0);
+                }
+            }
+        }
+        prop_assert!(seen.iter().all(|s| *s));
+        let sizes: Vec<(u32, u32)> = p.stacks.iter().map(|s| (s.bbox.width(), s.bbox.height())).collect();
+        prop_assert_eq!(analyze_block_sharing(&sizes, &p.stack_packing, 4).shared_blocks, 0);
+        let (macros, placements, _) = pack_micro_textures(&micros, &options).unwrap();
+        prop_assert_eq!(&placements, &p.packing.placements);
+        for (m, pl) in micros.iter().zip(&placements) {
+            let (w, h) = (m.rect.width(), m.rect.height());
+            let mt = &macros[pl.macro_index as usize];
+            for y in 0..h {
+                for x in 0..w {
+                    let (mx, my) = pl.macro_texel(w, h, x, y);
+                    let d = 4 * (my * mt.width + mx) as usize;
+                    let s = 4 * (y * w + x) as usize;
+                    prop_assert_eq!(&mt.rgba[d..d + 4], &m.pixels[s..s + 4]);
+                }
+            }
+        }
     }
 }

@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cell::{CellGrid, CellId, ViewCell};
 use crate::compress::{
-    decode_blocks, pack_rects, read_basis_ktx2, read_ktx2, transcode_basis, BasisFormat,
-    BlockFormat, Ktx2Texture, MacroTexture, PackingOptions, TextureFormat,
+    decode_blocks, pack_stacked, read_basis_ktx2, read_ktx2, transcode_basis, BasisFormat,
+    BlockFormat, Ktx2Texture, MacroTexture, PackingOptions, TexelRect, TextureFormat,
 };
 use crate::container::{self, Blob, ContainerError};
 use crate::object_cell::ObjectSetup;
@@ -54,7 +54,14 @@ pub const OBJECT_BUNDLE_VERSION: u32 = 6;
 /// by [`crate::compress::pack_rects`] with the cell header's `packing` options (2.5 ms for a city
 /// cell's 15 k quads), which the writer checks reproduces the bake's placement exactly. Version 5
 /// cells are still read.
-pub const PACKED_BUNDLE_VERSION: u32 = 7;
+pub const PACKED_BUNDLE_VERSION_7: u32 = 7;
+
+/// Version of the manifest and cell files of a layered bundle in a block format or Basis
+/// Universal, as written now: version 7 whose `packing` options may stack micro-textures of a
+/// face in shared blocks ([`PackingOptions::stack`]); the reader derives the places with
+/// [`crate::compress::pack_stacked`]. Version 7 cells (no stacks) are still read; a reader of
+/// version 7 rejects version 8 by its version.
+pub const PACKED_BUNDLE_VERSION: u32 = 8;
 
 /// The version a bundle baked with `params` is written with.
 pub fn version_for(params: &BakeParams) -> u32 {
@@ -647,13 +654,15 @@ impl Manifest {
             }
             return Ok(m);
         }
-        let block_4 = matches!(m.version, BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION)
-            && version_for(&m.params) == PACKED_BUNDLE_VERSION;
+        let block_4 = matches!(
+            m.version,
+            BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION | PACKED_BUNDLE_VERSION_7
+        ) && version_for(&m.params) == PACKED_BUNDLE_VERSION;
         if m.version != version_for(&m.params) && !block_4 {
             return Err(BundleError::invalid(
                 path,
                 format!(
-                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, {HLOD_BUNDLE_VERSION} for HLOD bundles, {BLOCK_BUNDLE_VERSION_4}, {BLOCK_BUNDLE_VERSION} or {PACKED_BUNDLE_VERSION} for block-compressed textures and {OBJECT_BUNDLE_VERSION} for object impostors, each with the parameters that call for it)",
+                    "bundle version {} is not supported here (this lemi reads version {BUNDLE_VERSION}, {HLOD_BUNDLE_VERSION} for HLOD bundles, {BLOCK_BUNDLE_VERSION_4}, {BLOCK_BUNDLE_VERSION}, {PACKED_BUNDLE_VERSION_7} or {PACKED_BUNDLE_VERSION} for block-compressed textures and {OBJECT_BUNDLE_VERSION} for object impostors, each with the parameters that call for it)",
                     m.version
                 ),
             ));
@@ -753,7 +762,8 @@ impl CellFile {
         }
         if self.header.hlod.is_none() && self.header.texture_format.block().is_some() {
             return match self.header.packing {
-                Some(_) => self.encode_v5(PACKED_BUNDLE_VERSION),
+                Some(p) if p.stack => self.encode_v5(PACKED_BUNDLE_VERSION),
+                Some(_) => self.encode_v5(PACKED_BUNDLE_VERSION_7),
                 None => self.encode_v5(BLOCK_BUNDLE_VERSION),
             };
         }
@@ -798,7 +808,7 @@ impl CellFile {
         blobs.push(Blob {
             name: "quads.bin".into(),
             data: match (version, &self.header.packing) {
-                (PACKED_BUNDLE_VERSION, Some(packing)) => {
+                (PACKED_BUNDLE_VERSION_7 | PACKED_BUNDLE_VERSION, Some(packing)) => {
                     encode_packed_quads(&self.header.quads, packing)?
                 }
                 _ => encode_quad_columns(&self.header.quads)?,
@@ -888,7 +898,13 @@ impl CellFile {
             }
             header.layers = decode_layers(&layers_blob.data, &header)?;
             let columns = unzstd_blob("quads.bin", &quads_blob.data, 1 << 32)?;
-            let records = if version == PACKED_BUNDLE_VERSION {
+            let records = if matches!(version, PACKED_BUNDLE_VERSION_7 | PACKED_BUNDLE_VERSION) {
+                if version == PACKED_BUNDLE_VERSION_7 && header.packing.is_some_and(|p| p.stack) {
+                    return Err(ContainerError::Header(
+                        "a version 7 cell whose `packing` stacks micro-textures (stacks are version 8)"
+                            .into(),
+                    ));
+                }
                 decode_packed_quads(&columns, &header)?
             } else {
                 decode_quad_columns(&columns)?
@@ -920,15 +936,27 @@ impl CellFile {
         }
         match (version, header.texture_format.block()) {
             (OBJECT_BUNDLE_VERSION, _) => {}
-            (BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION | PACKED_BUNDLE_VERSION, Some(_)) => {}
-            (BLOCK_BUNDLE_VERSION_4 | BLOCK_BUNDLE_VERSION | PACKED_BUNDLE_VERSION, None) => {
+            (
+                BLOCK_BUNDLE_VERSION_4
+                | BLOCK_BUNDLE_VERSION
+                | PACKED_BUNDLE_VERSION_7
+                | PACKED_BUNDLE_VERSION,
+                Some(_),
+            ) => {}
+            (
+                BLOCK_BUNDLE_VERSION_4
+                | BLOCK_BUNDLE_VERSION
+                | PACKED_BUNDLE_VERSION_7
+                | PACKED_BUNDLE_VERSION,
+                None,
+            ) => {
                 return Err(ContainerError::Header(format!(
                     "a version {version} cell without a block `texture_format`"
                 )))
             }
             (_, Some(_)) => {
                 return Err(ContainerError::Header(format!(
-                    "`texture_format` {} in a version {version} cell (block-compressed cells are version {BLOCK_BUNDLE_VERSION_4}, {BLOCK_BUNDLE_VERSION} or {PACKED_BUNDLE_VERSION})",
+                    "`texture_format` {} in a version {version} cell (block-compressed cells are version {BLOCK_BUNDLE_VERSION_4}, {BLOCK_BUNDLE_VERSION}, {PACKED_BUNDLE_VERSION_7} or {PACKED_BUNDLE_VERSION})",
                     header.texture_format
                 )))
             }
@@ -1234,8 +1262,9 @@ fn encode_packed_quads(
     packing: &PackingOptions,
 ) -> Result<Vec<u8>, ContainerError> {
     let sizes = quad_sizes(quads);
-    let derived = pack_rects(&sizes, packing)
-        .map_err(|e| ContainerError::Header(format!("quads.bin: packing the quads: {e}")))?;
+    let derived = pack_stacked(&quad_face_rects(quads), packing)
+        .map_err(|e| ContainerError::Header(format!("quads.bin: packing the quads: {e}")))?
+        .packing;
     for (i, (q, p)) in quads.iter().zip(&derived.placements).enumerate() {
         let (w, h) = p.footprint(sizes[i].0, sizes[i].1);
         if q.macro_index != p.macro_index || q.rect != [p.x, p.y, w, h] || q.rotated != p.rotated {
@@ -1279,6 +1308,17 @@ fn encode_packed_quads(
     zstd_blob("quads.bin", &raw)
 }
 
+/// The quads' `(face, texel rectangle)` as the packer takes them ([`pack_stacked`]).
+fn quad_face_rects(quads: &[Quad]) -> Vec<(u32, TexelRect)> {
+    quads
+        .iter()
+        .map(|q| {
+            let [x0, y0, x1, y1] = q.texels.map(u32::from);
+            (q.face.index() as u32, TexelRect { x0, y0, x1, y1 })
+        })
+        .collect()
+}
+
 /// The texel rectangles' sizes `(w, h)` of `quads`.
 fn quad_sizes(quads: &[Quad]) -> Vec<(u32, u32)> {
     quads
@@ -1305,7 +1345,7 @@ fn decode_packed_quads(raw: &[u8], header: &CellHeader) -> Result<Vec<u8>, Conta
     let packing = header
         .packing
         .as_ref()
-        .ok_or_else(|| bad("a version 7 cell without its `packing` options".into()))?;
+        .ok_or_else(|| bad("a version 7 or 8 cell without its `packing` options".into()))?;
     let n = match raw.get(..4) {
         Some(b) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
         None => return Err(bad(format!("{} bytes, no quad count", raw.len()))),
@@ -1351,12 +1391,17 @@ fn decode_packed_quads(raw: &[u8], header: &CellHeader) -> Result<Vec<u8>, Conta
             r[8 + 2 * k..10 + 2 * k].copy_from_slice(&(*v as u16).to_le_bytes());
         }
     }
-    let sizes: Vec<(u32, u32)> = texels
+    let rects: Vec<(u32, TexelRect)> = texels
         .iter()
-        .map(|t| ((t[2] - t[0]) as u32, (t[3] - t[1]) as u32))
+        .zip(faces)
+        .map(|(t, &f)| {
+            let [x0, y0, x1, y1] = t.map(u32::from);
+            (f as u32, TexelRect { x0, y0, x1, y1 })
+        })
         .collect();
-    let derived =
-        pack_rects(&sizes, packing).map_err(|e| bad(format!("packing the quads: {e}")))?;
+    let derived = pack_stacked(&rects, packing)
+        .map_err(|e| bad(format!("packing the quads: {e}")))?
+        .packing;
     let listed: Vec<(u32, u32)> = header.macros.iter().map(|m| (m.width, m.height)).collect();
     if derived.macro_sizes != listed {
         return Err(bad(format!(
@@ -1644,6 +1689,7 @@ pub fn reference_viewpoint(cell: &ViewCell) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::compress::pack_rects;
     use glam::IVec3;
 
     pub(crate) fn sample_cell() -> CellFile {
@@ -1805,19 +1851,34 @@ mod tests {
     }
 
     /// A BC1 cell of quads with texel rectangles `(face, layer, x0, y0, w, h)` on two faces of
-    /// three layers, placed by the packer as a bake places them (version 5: the places stored).
-    fn packed_cell(rects: &[(usize, u16, u16, u16, u16, u16)]) -> CellFile {
+    /// three layers, placed by the packer as a bake places them, in stacks or not (version 5:
+    /// the places stored).
+    fn packed_cell(rects: &[(usize, u16, u16, u16, u16, u16)], stack: bool) -> CellFile {
         let packing = PackingOptions {
             max_size: 1024,
             block: 4,
             trim: true,
+            stack,
         };
-        let sizes: Vec<(u32, u32)> = rects.iter().map(|r| (r.4 as u32, r.5 as u32)).collect();
-        let derived = pack_rects(&sizes, &packing).unwrap();
+        let faces = [Face::PosX, Face::NegZ];
+        let face_rects: Vec<(u32, TexelRect)> = rects
+            .iter()
+            .map(|&(f, _, x0, y0, w, h)| {
+                let (x0, y0) = (x0 as u32, y0 as u32);
+                let rect = TexelRect {
+                    x0,
+                    y0,
+                    x1: x0 + w as u32,
+                    y1: y0 + h as u32,
+                };
+                (faces[f].index() as u32, rect)
+            })
+            .collect();
+        let derived = pack_stacked(&face_rects, &packing).unwrap().packing;
         let mut c = sample_cell();
         c.header.texture_format = TextureFormat::Bc1;
         c.header.resolution = 512;
-        c.header.faces = vec![Face::PosX, Face::NegZ];
+        c.header.faces = faces.to_vec();
         let layer = |d: f64| LayerInfo {
             distance: d,
             near_border: d * 0.9,
@@ -1879,18 +1940,21 @@ mod tests {
             let mut rects = rects;
             // as a bake orders them: face by face, layer by layer
             rects.sort_by_key(|r| (r.0, r.1));
-            let v5 = packed_cell(&rects);
-            let mut c = v5.clone();
-            c.header.packing = Some(PackingOptions { max_size: 1024, block: 4, trim: true });
-            let bytes = c.encode().unwrap();
-            proptest::prop_assert_eq!(&bytes[8..12], &PACKED_BUNDLE_VERSION.to_le_bytes());
-            let back = CellFile::decode(&bytes).unwrap();
-            proptest::prop_assert_eq!(&back.header.quads, &v5.header.quads);
-            proptest::prop_assert_eq!(back, c);
+            for (stack, version) in [(false, PACKED_BUNDLE_VERSION_7), (true, PACKED_BUNDLE_VERSION)] {
+                let v5 = packed_cell(&rects, stack);
+                let mut c = v5.clone();
+                c.header.packing =
+                    Some(PackingOptions { max_size: 1024, block: 4, trim: true, stack });
+                let bytes = c.encode().unwrap();
+                proptest::prop_assert_eq!(&bytes[8..12], &version.to_le_bytes());
+                let back = CellFile::decode(&bytes).unwrap();
+                proptest::prop_assert_eq!(&back.header.quads, &v5.header.quads);
+                proptest::prop_assert_eq!(back, c);
+            }
         }
     }
 
-    /// Version 7 cells store no macro-texture places: the reader derives them with the packer, so
+    /// Version 7 and 8 cells store no macro-texture places: the reader derives them with the packer, so
     /// the packer's placements are part of the format. This pins them on a fixed input; if a
     /// change to `pack_rects` fails it, version 7 cells would read wrong: keep the old packer for
     /// them and write a new version.
@@ -1907,6 +1971,7 @@ mod tests {
                     max_size: 1024,
                     block,
                     trim,
+                    stack: false,
                 },
             )
             .unwrap();
@@ -1927,6 +1992,61 @@ mod tests {
         );
     }
 
+    /// Version 8 cells derive the stacks as well ([`pack_stacked`]): this pins the stacking and
+    /// the places of the stacks' members on a fixed input of two faces whose thin rectangles
+    /// overlap and touch across layers. A change that fails it needs a new version.
+    #[test]
+    fn the_stacks_and_their_placements_are_pinned_by_version_8() {
+        let rects: Vec<(u32, TexelRect)> = (0..3000u32)
+            .map(|i| {
+                let (x0, y0) = (i * 37 % 500, i * 13 % 500);
+                let (w, h) = if i % 3 == 0 {
+                    (1 + i % 200, 1 + i % 2)
+                } else {
+                    (1 + i * 7 % 37, 1 + i * 11 % 29)
+                };
+                (
+                    i / 1500,
+                    TexelRect {
+                        x0,
+                        y0,
+                        x1: x0 + w,
+                        y1: y0 + h,
+                    },
+                )
+            })
+            .collect();
+        let options = PackingOptions {
+            max_size: 1024,
+            block: 4,
+            trim: true,
+            stack: true,
+        };
+        let p = pack_stacked(&rects, &options).unwrap();
+        assert!(p.stacks.len() < rects.len());
+        let mut hasher = blake3::Hasher::new();
+        for s in &p.stacks {
+            hasher.update(&(s.members.len() as u32).to_le_bytes());
+            for m in &s.members {
+                hasher.update(&(*m as u32).to_le_bytes());
+            }
+        }
+        for (w, h) in &p.packing.macro_sizes {
+            hasher.update(&w.to_le_bytes());
+            hasher.update(&h.to_le_bytes());
+        }
+        for q in &p.packing.placements {
+            hasher.update(&q.macro_index.to_le_bytes());
+            hasher.update(&q.x.to_le_bytes());
+            hasher.update(&q.y.to_le_bytes());
+            hasher.update(&[q.rotated as u8]);
+        }
+        assert_eq!(
+            hasher.finalize().to_hex().as_str(),
+            "63f94ec12749f73e1df2fbe29d8709ad3112a95d9a8b162c8f6bbf60b4b4b9bb"
+        );
+    }
+
     #[test]
     fn packed_quads_are_smaller_and_must_lie_where_the_packing_puts_them() {
         let rects: Vec<_> = (0..2000u16)
@@ -1935,12 +2055,13 @@ mod tests {
                 (f, l, i * 7 % 480, i * 13 % 480, 1 + i % 9, 1 + i % 23)
             })
             .collect();
-        let v5 = packed_cell(&rects);
+        let v5 = packed_cell(&rects, false);
         let mut c = v5.clone();
         c.header.packing = Some(PackingOptions {
             max_size: 1024,
             block: 4,
             trim: true,
+            stack: false,
         });
         let (old, new) = (v5.encode().unwrap(), c.encode().unwrap());
         assert_eq!(old[8..12], BLOCK_BUNDLE_VERSION.to_le_bytes());

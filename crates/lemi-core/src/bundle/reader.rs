@@ -448,9 +448,9 @@ mod tests {
         manifest.write(&dir).unwrap();
         let e = Bundle::open(&dir).unwrap_err();
         assert!(e.to_string().contains("version 1"), "{e}");
-        // a block-compressed bundle is version 7, or 4 or 5 when baked before version 7; a PNG
-        // bundle is none of them
-        for v in [4, 5, 7] {
+        // a block-compressed bundle is version 8, or 4, 5 or 7 when baked before version 8; a
+        // PNG bundle is none of them
+        for v in [4, 5, 7, 8] {
             manifest.version = v;
             let path = manifest_path(&dir);
             let decode = |m: &Manifest| Manifest::decode(&path, &m.encode().unwrap());

@@ -26,10 +26,26 @@
 //! multiples of it, so every corner of a maximal free rectangle and every position is too: each
 //! micro-texture owns the whole blocks of its padded footprint, no block mixes two, and its own
 //! texels keep their exact rectangle at the footprint's top-left. [`analyze_block_sharing`] checks it.
+//!
+//! **Stacks** (`PackingOptions::stack`, block formats): padding every micro-texture to whole
+//! blocks costs most where they are thin. A grazing ground plane is cut by every slab into a
+//! band one or two texels high across the face, and each band, a micro-texture of its own layer,
+//! takes a whole block row: on a `builtin:city:1M` cell the micro-textures one texel thin take
+//! 21 % of the padded texels for 5 % of the opaque ones. Micro-textures of one face whose texel
+//! rectangles do not overlap in the face image can share its blocks instead: a *stack* is the
+//! bounding rectangle of such micro-textures, holding each at its own place in the face image
+//! (texels no member covers transparent), and the packer places and pads stacks instead of
+//! micro-textures. A block of a stack is then a 4×4 patch of the face image as seen from the
+//! cell's reference point, the image's own neighbouring texels (a band of ground and the next
+//! slab's band above it), as coherent as a block of any texture; what padding was for stays
+//! true: every member keeps its exact texel rectangle (the renderer clamps a quad's fetches to
+//! it), and no block mixes two stacks. [`stack_rects`] builds the stacks greedily (below), a
+//! pure function of the rectangles in their order, so a reader can derive them again
+//! ([`pack_stacked`]).
 
 use rayon::prelude::*;
 
-use super::micro_textures::MicroTexture;
+use super::micro_textures::{MicroTexture, TexelRect};
 use super::CompressError;
 
 /// Parameters of macro-texture packing.
@@ -46,6 +62,10 @@ pub struct PackingOptions {
     /// topmost's), instead of the paper's power-of-two sides, which can double a texture. Every
     /// GPU lemi runs on samples textures of any size; the sides stay multiples of `block`.
     pub trim: bool,
+    /// Pack micro-textures of one face in stacks that share blocks (see the module docs; only
+    /// with `block` > 1). Absent in the headers of cells written before it: `false`.
+    #[serde(default)]
+    pub stack: bool,
 }
 
 impl Default for PackingOptions {
@@ -54,6 +74,7 @@ impl Default for PackingOptions {
             max_size: 4096,
             block: 1,
             trim: false,
+            stack: false,
         }
     }
 }
@@ -497,6 +518,303 @@ pub fn analyze_block_sharing(
     }
 }
 
+/// Micro-textures of one face image packed as one rectangle ([`PackingOptions::stack`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Stack {
+    /// The members' bounding rectangle in the face image.
+    pub bbox: TexelRect,
+    /// Indices of the member rectangles, in the order they joined.
+    pub members: Vec<usize>,
+}
+
+/// Padded blocks of a `w × h` rectangle.
+fn padded_blocks(r: &TexelRect, block: u32) -> i64 {
+    (r.width().div_ceil(block) as i64) * (r.height().div_ceil(block) as i64)
+}
+
+fn disjoint(a: &TexelRect, b: &TexelRect) -> bool {
+    a.x1 <= b.x0 || b.x1 <= a.x0 || a.y1 <= b.y0 || b.y1 <= a.y0
+}
+
+/// Side of the buckets of [`stack_rects`]' spatial index, in texels.
+const STACK_BUCKET: u32 = 32;
+
+/// Groups rectangles `(face, rect)` (a face's key and a texel rectangle of its image) into stacks
+/// whose members do not overlap, so that padding the stacks to `block`-sided blocks takes fewer
+/// blocks than padding the rectangles. Greedy and deterministic:
+/// 1. rectangles are taken by face, then by decreasing area (ties in input order); each joins
+///    the stack of its face whose padded blocks its joining lowers most (ties: the older stack),
+///    provided it overlaps no member and the stack's sides stay within `max_side`, or starts one;
+/// 2. then, repeatedly until nothing changes, each stack (oldest first) is merged with the
+///    neighbour that saves most blocks under the same conditions.
+///
+/// Only stacks whose rectangle comes within `block − 1` texels of the other can save a block
+/// (two rectangles `block` or more apart need at least their blocks together), so candidates are
+/// found through a bucket grid of the faces' images.
+pub fn stack_rects(rects: &[(u32, TexelRect)], block: u32, max_side: u32) -> Vec<Stack> {
+    let block = block.max(1);
+    let mut order: Vec<usize> = (0..rects.len()).collect();
+    order.sort_by_key(|&i| (rects[i].0, std::cmp::Reverse(rects[i].1.texels()), i));
+    let mut stacks: Vec<(u32, Stack)> = Vec::new();
+    let mut alive: Vec<bool> = Vec::new();
+    // the bucket grid: per face key (dense, as given), buckets of the image row by row
+    let faces = rects.iter().map(|r| r.0 as usize + 1).max().unwrap_or(0);
+    let mut extent = vec![(0u32, 0u32); faces];
+    for (f, r) in rects {
+        let e = &mut extent[*f as usize];
+        *e = (e.0.max(r.x1), e.1.max(r.y1));
+    }
+    // a reach of up to `block − 1` texels past the image is clamped to its last bucket
+    let grid: Vec<(u32, u32)> = extent
+        .iter()
+        .map(|&(w, h)| {
+            (
+                w.div_ceil(STACK_BUCKET).max(1),
+                h.div_ceil(STACK_BUCKET).max(1),
+            )
+        })
+        .collect();
+    let mut index: Vec<Vec<Vec<usize>>> = grid
+        .iter()
+        .map(|&(nx, ny)| vec![Vec::new(); nx as usize * ny as usize])
+        .collect();
+    let reach = |r: &TexelRect| TexelRect {
+        x0: r.x0.saturating_sub(block - 1),
+        y0: r.y0.saturating_sub(block - 1),
+        x1: r.x1 + block - 1,
+        y1: r.y1 + block - 1,
+    };
+    let buckets = |face: u32, r: &TexelRect| {
+        let (nx, ny) = grid[face as usize];
+        let bx0 = (r.x0 / STACK_BUCKET).min(nx - 1);
+        let bx1 = ((r.x1.max(r.x0 + 1) - 1) / STACK_BUCKET).min(nx - 1);
+        let by0 = (r.y0 / STACK_BUCKET).min(ny - 1);
+        let by1 = ((r.y1.max(r.y0 + 1) - 1) / STACK_BUCKET).min(ny - 1);
+        (by0..=by1).flat_map(move |by| (bx0..=bx1).map(move |bx| (by * nx + bx) as usize))
+    };
+    // adds `id` to the buckets of `r` that those of `old` (its rectangle before it grew) lack
+    let register = |index: &mut Vec<Vec<Vec<usize>>>,
+                    face: u32,
+                    old: Option<&TexelRect>,
+                    r: &TexelRect,
+                    id: usize| {
+        let had: Vec<usize> = old.map(|o| buckets(face, o).collect()).unwrap_or_default();
+        for b in buckets(face, r) {
+            if had.binary_search(&b).is_err() {
+                index[face as usize][b].push(id);
+            }
+        }
+    };
+    // stamp[id] == query: already a candidate of this query
+    let mut stamp: Vec<u32> = Vec::new();
+    let mut query = 0u32;
+    let mut candidates = |index: &Vec<Vec<Vec<usize>>>,
+                          stamp: &mut Vec<u32>,
+                          alive: &[bool],
+                          face: u32,
+                          r: &TexelRect| {
+        query += 1;
+        stamp.resize(alive.len(), 0);
+        let mut c = Vec::new();
+        for b in buckets(face, &reach(r)) {
+            for &id in &index[face as usize][b] {
+                if alive[id] && stamp[id] != query {
+                    stamp[id] = query;
+                    c.push(id);
+                }
+            }
+        }
+        c.sort_unstable();
+        c
+    };
+    let fits = |u: &TexelRect| u.width() <= max_side && u.height() <= max_side;
+    // 1. every rectangle joins the best stack or starts one
+    for &i in &order {
+        let (face, r) = rects[i];
+        let mut best: Option<(i64, usize)> = None;
+        for id in candidates(&index, &mut stamp, &alive, face, &r) {
+            let s = &stacks[id].1;
+            let u = s.bbox.union(&r);
+            let gain =
+                padded_blocks(&s.bbox, block) + padded_blocks(&r, block) - padded_blocks(&u, block);
+            if gain <= 0 || !fits(&u) || best.is_some_and(|(g, _)| g >= gain) {
+                continue;
+            }
+            if s.members.iter().all(|&m| disjoint(&rects[m].1, &r)) {
+                best = Some((gain, id));
+            }
+        }
+        match best {
+            Some((_, id)) => {
+                let s = &mut stacks[id].1;
+                let old = s.bbox;
+                s.bbox = s.bbox.union(&r);
+                s.members.push(i);
+                let bbox = s.bbox;
+                register(&mut index, face, Some(&old), &bbox, id);
+            }
+            None => {
+                let id = stacks.len();
+                stacks.push((
+                    face,
+                    Stack {
+                        bbox: r,
+                        members: vec![i],
+                    },
+                ));
+                alive.push(true);
+                register(&mut index, face, None, &r, id);
+            }
+        }
+    }
+    // 2. stacks merge with their best neighbour while that saves blocks
+    // a pair of stacks neither of which changed was already refused: after the first pass only
+    // stacks that grew look for a neighbour (one that grew is looked at from its own side)
+    let mut dirty = vec![true; stacks.len()];
+    loop {
+        let mut merged = false;
+        let mut grew = vec![false; stacks.len()];
+        for id in 0..stacks.len() {
+            if !alive[id] || !dirty[id] {
+                continue;
+            }
+            let face = stacks[id].0;
+            let a = stacks[id].1.bbox;
+            let mut best: Option<(i64, usize)> = None;
+            for other in candidates(&index, &mut stamp, &alive, face, &a) {
+                if other == id || !alive[other] {
+                    continue;
+                }
+                let b = &stacks[other].1;
+                let u = a.union(&b.bbox);
+                let gain = padded_blocks(&a, block) + padded_blocks(&b.bbox, block)
+                    - padded_blocks(&u, block);
+                if gain <= 0 || !fits(&u) || best.is_some_and(|(g, _)| g >= gain) {
+                    continue;
+                }
+                // only members inside the other's rectangle can overlap one of its members
+                let near_b: Vec<&TexelRect> = b
+                    .members
+                    .iter()
+                    .map(|&n| &rects[n].1)
+                    .filter(|r| !disjoint(r, &a))
+                    .collect();
+                let ok = near_b.is_empty()
+                    || stacks[id]
+                        .1
+                        .members
+                        .iter()
+                        .map(|&m| &rects[m].1)
+                        .filter(|r| !disjoint(r, &b.bbox))
+                        .all(|r| near_b.iter().all(|n| disjoint(r, n)));
+                if ok {
+                    best = Some((gain, other));
+                }
+            }
+            if let Some((_, other)) = best {
+                let taken = std::mem::take(&mut stacks[other].1.members);
+                alive[other] = false;
+                let b = stacks[other].1.bbox;
+                let s = &mut stacks[id].1;
+                let old = s.bbox;
+                s.bbox = s.bbox.union(&b);
+                s.members.extend(taken);
+                let bbox = s.bbox;
+                register(&mut index, face, Some(&old), &bbox, id);
+                grew[id] = true;
+                merged = true;
+            }
+        }
+        if !merged {
+            break;
+        }
+        dirty = grew;
+    }
+    stacks
+        .into_iter()
+        .zip(alive)
+        .filter(|(_, a)| *a)
+        .map(|((_, s), _)| s)
+        .collect()
+}
+
+/// A packing of rectangles through stacks: the stacks, the stacks' packing, and one placement
+/// per rectangle (a member's place and turn inside its stack's).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct StackedPacking {
+    pub stacks: Vec<Stack>,
+    /// The packing of the stacks' rectangles, in the order of `stacks`.
+    pub stack_packing: Packing,
+    /// One placement per input rectangle; `macro_sizes` those of `stack_packing`.
+    pub packing: Packing,
+}
+
+/// Packs rectangles `(face, rect)` of face images: with [`PackingOptions::stack`] (and blocks)
+/// in the stacks of [`stack_rects`], else each alone, which is exactly [`pack_rects`] on their
+/// sizes. Readers derive quads' places with it, so it is part of the cell format (version 8).
+pub fn pack_stacked(
+    rects: &[(u32, TexelRect)],
+    options: &PackingOptions,
+) -> Result<StackedPacking, CompressError> {
+    let stacks = if options.stack && options.block > 1 {
+        stack_rects(rects, options.block, options.max_size)
+    } else {
+        rects
+            .iter()
+            .enumerate()
+            .map(|(i, &(_, r))| Stack {
+                bbox: r,
+                members: vec![i],
+            })
+            .collect()
+    };
+    let sizes: Vec<(u32, u32)> = stacks
+        .iter()
+        .map(|s| (s.bbox.width(), s.bbox.height()))
+        .collect();
+    let stack_packing = pack_rects(&sizes, options)?;
+    let mut placements = vec![
+        MacroPlacement {
+            macro_index: 0,
+            x: 0,
+            y: 0,
+            rotated: false,
+        };
+        rects.len()
+    ];
+    for (s, p) in stacks.iter().zip(&stack_packing.placements) {
+        for &m in &s.members {
+            let r = rects[m].1;
+            let (dx, dy) = (r.x0 - s.bbox.x0, r.y0 - s.bbox.y0);
+            // the stack's texel (X, Y) lies at (x + X, y + Y), or turned at (x + H − 1 − Y, y + X)
+            placements[m] = if p.rotated {
+                MacroPlacement {
+                    macro_index: p.macro_index,
+                    x: p.x + s.bbox.height() - dy - r.height(),
+                    y: p.y + dx,
+                    rotated: true,
+                }
+            } else {
+                MacroPlacement {
+                    macro_index: p.macro_index,
+                    x: p.x + dx,
+                    y: p.y + dy,
+                    rotated: false,
+                }
+            };
+        }
+    }
+    let packing = Packing {
+        macro_sizes: stack_packing.macro_sizes.clone(),
+        placements,
+    };
+    Ok(StackedPacking {
+        stacks,
+        stack_packing,
+        packing,
+    })
+}
+
 /// Packs micro-textures (GI 2002 sec. 5.4) and copies their pixels into the macro-textures.
 /// Returns the macro-textures, one placement per micro-texture (input order) and the statistics.
 pub fn pack_micro_textures(
@@ -512,21 +830,34 @@ pub fn pack_micro_textures(
             )));
         }
     }
-    let sizes: Vec<(u32, u32)> = micros
+    let rects: Vec<(u32, TexelRect)> = micros
         .iter()
-        .map(|m| (m.rect.width(), m.rect.height()))
+        .map(|m| (m.face.index() as u32, m.rect))
         .collect();
-    let packing = pack_rects(&sizes, options)?;
-    let stats = analyze_packing(&sizes, &packing)?;
+    let stacked = pack_stacked(&rects, options)?;
+    let stack_sizes: Vec<(u32, u32)> = stacked
+        .stacks
+        .iter()
+        .map(|s| (s.bbox.width(), s.bbox.height()))
+        .collect();
+    let mut stats = analyze_packing(&stack_sizes, &stacked.stack_packing)?;
     if options.block > 1 {
-        let sharing = analyze_block_sharing(&sizes, &packing, options.block);
+        let sharing = analyze_block_sharing(&stack_sizes, &stacked.stack_packing, options.block);
         if sharing.shared_blocks > 0 {
             return Err(CompressError::Invalid(format!(
-                "{} of {} texel blocks of {}² hold two micro-textures",
+                "{} of {} texel blocks of {}² hold two micro-textures or stacks",
                 sharing.shared_blocks, sharing.used_blocks, options.block
             )));
         }
     }
+    stats.micro_textures = micros.len() as u64;
+    stats.micro_texels = micros.iter().map(|m| m.rect.area()).sum();
+    stats.efficiency = if stats.macro_texels == 0 {
+        1.0
+    } else {
+        stats.micro_texels as f64 / stats.macro_texels as f64
+    };
+    let packing = stacked.packing;
     let mut by_macro: Vec<Vec<usize>> = vec![Vec::new(); packing.macro_sizes.len()];
     for (i, p) in packing.placements.iter().enumerate() {
         by_macro[p.macro_index as usize].push(i);

@@ -43,8 +43,9 @@ pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelSta
 pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture, Supercompression};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
-    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, BlockSharingStats,
-    MacroPlacement, MacroTexture, Packing, PackingOptions, PackingStats,
+    analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, pack_stacked,
+    stack_rects, BlockSharingStats, MacroPlacement, MacroTexture, Packing, PackingOptions,
+    PackingStats, Stack, StackedPacking,
 };
 pub use micro_textures::{
     analyze_micro_textures, extract_micro_textures, quad_corners, MicroTexture,
