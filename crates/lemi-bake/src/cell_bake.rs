@@ -32,7 +32,7 @@ use lemi_core::bundle::{
 use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
-    compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, CompressError,
+    compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, BlockFormat, CompressError,
     CompressOptions, FaceLayers, MacroTexture, MicroTextureOptions, PackingOptions,
     Supercompression, TextureFormat,
 };
@@ -443,8 +443,19 @@ pub fn compress_options(params: &BakeParams) -> CompressOptions {
             },
             // no texture doubled for the few footprints that overflow a power of two
             trim: true,
-            // thin micro-textures of a face share blocks in stacks (version 8 cells)
-            stack: params.texture_format.block().is_some(),
+            // micro-textures of a face share blocks in stacks (version 8 cells): with BC1 only
+            // those at most half a block thin, whose padding wasted half of every block, since
+            // a BC1 block's four colours then serve all the texels it holds; BC7's (and
+            // UASTC's) partitions serve two or three regions of a block, so with them every
+            // micro-texture may join; ETC1S (one base colour a block, shared codebooks; its
+            // point is the disk, which it meets without) does not stack (docs/COMPRESSION.md,
+            // "Stacks")
+            stack: match (params.texture_format, params.texture_format.block()) {
+                (TextureFormat::Etc1s, _) => 0,
+                (_, Some(BlockFormat::Bc1)) => 2,
+                (_, Some(BlockFormat::Bc7)) => PackingOptions::default().max_size,
+                (_, None) => 0,
+            },
             ..Default::default()
         },
         ..Default::default()

@@ -91,9 +91,10 @@ fn every_texture_format_bakes_and_reports_its_bytes_and_seconds() {
     // block formats pad micro-textures to 4×4 blocks)
     assert!(memory[1] < memory[0] / 2, "{memory:?}");
     assert!(memory[2] < memory[1], "{memory:?}");
-    // UASTC is transcoded to BC7 and ETC1S to BC1: the same packing, the same memory
+    // UASTC is transcoded to BC7: the same packing (stacks), the same memory; ETC1S to BC1,
+    // without stacks: at least BC1's
     assert_eq!(memory[3], memory[1], "{memory:?}");
-    assert_eq!(memory[4], memory[2], "{memory:?}");
+    assert!(memory[4] >= memory[2], "{memory:?}");
 }
 
 #[test]

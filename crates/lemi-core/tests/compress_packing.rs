@@ -303,7 +303,7 @@ fn block_opts(max_size: u32) -> PackingOptions {
         max_size,
         block: 4,
         trim: true,
-        stack: false,
+        stack: 0,
     }
 }
 
@@ -386,7 +386,7 @@ proptest! {
         block in prop::sample::select(vec![1u32, 4]),
     ) {
         let max = 1 << max_log;
-        let paper = PackingOptions { max_size: max, block, trim: false, stack: false };
+        let paper = PackingOptions { max_size: max, block, trim: false, stack: 0 };
         let trimmed = PackingOptions { trim: true, ..paper };
         let b = pack_rects(&sizes, &trimmed).unwrap();
         prop_assert!(analyze_packing(&sizes, &pack_rects(&sizes, &paper).unwrap()).is_ok());
@@ -425,7 +425,7 @@ fn trimmed_packing_uses_fewer_texels_than_powers_of_two() {
             max_size: 4096,
             block,
             trim: false,
-            stack: false,
+            stack: 0,
         };
         let trimmed = PackingOptions {
             trim: true,
@@ -482,7 +482,7 @@ fn stacks_take_fewer_blocks_for_thin_bands_and_none_without_blocks() {
     let micros = stack_case(7, 120);
     let (_, _, plain) = pack_micro_textures(&micros, &block_opts(1024)).unwrap();
     let stacked_opts = PackingOptions {
-        stack: true,
+        stack: 1024,
         ..block_opts(1024)
     };
     let (_, _, stacked) = pack_micro_textures(&micros, &stacked_opts).unwrap();
@@ -497,7 +497,7 @@ fn stacks_take_fewer_blocks_for_thin_bands_and_none_without_blocks() {
     let p2 = pack_stacked(
         &face_rects(&micros),
         &PackingOptions {
-            stack: true,
+            stack: 1024,
             ..opts(1024)
         },
     )
@@ -519,9 +519,13 @@ proptest! {
     /// texels of two stacks; every micro-texture's texels are where its placement says (turned
     /// stacks included), and its rectangle's texels are its own.
     #[test]
-    fn stacked_packing_keeps_every_micro_textures_texels(seed in 1u64..u64::MAX, n in 1usize..160) {
+    fn stacked_packing_keeps_every_micro_textures_texels(
+        seed in 1u64..u64::MAX,
+        n in 1usize..160,
+        thickest in prop::sample::select(vec![1u32, 2, 512]),
+    ) {
         let micros = stack_case(seed, n);
-        let options = PackingOptions { stack: true, ..block_opts(512) };
+        let options = PackingOptions { stack: thickest, ..block_opts(512) };
         let rects = face_rects(&micros);
         let p = pack_stacked(&rects, &options).unwrap();
         let mut seen = vec![false; micros.len()];
@@ -539,6 +543,15 @@ proptest! {
             }
         }
         prop_assert!(seen.iter().all(|s| *s));
+        // a rectangle thicker than `thickest` stays alone
+        for s in &p.stacks {
+            if s.members.len() > 1 {
+                for &m in &s.members {
+                    let r = rects[m].1;
+                    prop_assert!(r.width().min(r.height()) <= thickest);
+                }
+            }
+        }
         let sizes: Vec<(u32, u32)> = p.stacks.iter().map(|s| (s.bbox.width(), s.bbox.height())).collect();
         prop_assert_eq!(analyze_block_sharing(&sizes, &p.stack_packing, 4).shared_blocks, 0);
         let (macros, placements, _) = pack_micro_textures(&micros, &options).unwrap();

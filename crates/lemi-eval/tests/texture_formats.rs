@@ -148,11 +148,15 @@ fn every_texture_format_renders_without_cracks_and_close_to_the_png_bake() {
             None => png = Some((s.mean_flip, resident)),
             Some((flip, png_resident)) => {
                 // ETC1S codes a block with one base colour and shared codebooks: the smallest
-                // files, about twice BC1's colour error (round trips in `basis_universal`)
-                let bound = if format == TextureFormat::Etc1s {
-                    0.02
-                } else {
-                    0.01
+                // files, about twice BC1's colour error (round trips in `basis_universal`). BC1
+                // stacks thin micro-textures (docs/COMPRESSION.md, "Stacks"): a block that held
+                // one band and padding (three colours for four texels) holds four bands (four
+                // colours for sixteen), which costs FLIP where the bands are textured: +0.0068
+                // over PNG without stacks on this cell, +0.0101 with them, at 77 % of the memory
+                let bound = match format {
+                    TextureFormat::Etc1s => 0.02,
+                    TextureFormat::Bc1 => 0.0125,
+                    _ => 0.01,
                 };
                 assert!(
                     (s.mean_flip - flip).abs() <= bound,

@@ -58,7 +58,7 @@ pub const PACKED_BUNDLE_VERSION_7: u32 = 7;
 
 /// Version of the manifest and cell files of a layered bundle in a block format or Basis
 /// Universal, as written now: version 7 whose `packing` options may stack micro-textures of a
-/// face in shared blocks ([`PackingOptions::stack`]); the reader derives the places with
+/// face in shared blocks ([`PackingOptions::stack`], 0 for none); the reader derives the places with
 /// [`crate::compress::pack_stacked`]. Version 7 cells (no stacks) are still read; a reader of
 /// version 7 rejects version 8 by its version.
 pub const PACKED_BUNDLE_VERSION: u32 = 8;
@@ -762,8 +762,7 @@ impl CellFile {
         }
         if self.header.hlod.is_none() && self.header.texture_format.block().is_some() {
             return match self.header.packing {
-                Some(p) if p.stack => self.encode_v5(PACKED_BUNDLE_VERSION),
-                Some(_) => self.encode_v5(PACKED_BUNDLE_VERSION_7),
+                Some(_) => self.encode_v5(PACKED_BUNDLE_VERSION),
                 None => self.encode_v5(BLOCK_BUNDLE_VERSION),
             };
         }
@@ -899,7 +898,8 @@ impl CellFile {
             header.layers = decode_layers(&layers_blob.data, &header)?;
             let columns = unzstd_blob("quads.bin", &quads_blob.data, 1 << 32)?;
             let records = if matches!(version, PACKED_BUNDLE_VERSION_7 | PACKED_BUNDLE_VERSION) {
-                if version == PACKED_BUNDLE_VERSION_7 && header.packing.is_some_and(|p| p.stack) {
+                if version == PACKED_BUNDLE_VERSION_7 && header.packing.is_some_and(|p| p.stack > 0)
+                {
                     return Err(ContainerError::Header(
                         "a version 7 cell whose `packing` stacks micro-textures (stacks are version 8)"
                             .into(),
@@ -1853,7 +1853,7 @@ mod tests {
     /// A BC1 cell of quads with texel rectangles `(face, layer, x0, y0, w, h)` on two faces of
     /// three layers, placed by the packer as a bake places them, in stacks or not (version 5:
     /// the places stored).
-    fn packed_cell(rects: &[(usize, u16, u16, u16, u16, u16)], stack: bool) -> CellFile {
+    fn packed_cell(rects: &[(usize, u16, u16, u16, u16, u16)], stack: u32) -> CellFile {
         let packing = PackingOptions {
             max_size: 1024,
             block: 4,
@@ -1940,13 +1940,13 @@ mod tests {
             let mut rects = rects;
             // as a bake orders them: face by face, layer by layer
             rects.sort_by_key(|r| (r.0, r.1));
-            for (stack, version) in [(false, PACKED_BUNDLE_VERSION_7), (true, PACKED_BUNDLE_VERSION)] {
+            for stack in [0, 2, 1024] {
                 let v5 = packed_cell(&rects, stack);
                 let mut c = v5.clone();
                 c.header.packing =
                     Some(PackingOptions { max_size: 1024, block: 4, trim: true, stack });
                 let bytes = c.encode().unwrap();
-                proptest::prop_assert_eq!(&bytes[8..12], &version.to_le_bytes());
+                proptest::prop_assert_eq!(&bytes[8..12], &PACKED_BUNDLE_VERSION.to_le_bytes());
                 let back = CellFile::decode(&bytes).unwrap();
                 proptest::prop_assert_eq!(&back.header.quads, &v5.header.quads);
                 proptest::prop_assert_eq!(back, c);
@@ -1971,7 +1971,7 @@ mod tests {
                     max_size: 1024,
                     block,
                     trim,
-                    stack: false,
+                    stack: 0,
                 },
             )
             .unwrap();
@@ -2020,7 +2020,7 @@ mod tests {
             max_size: 1024,
             block: 4,
             trim: true,
-            stack: true,
+            stack: 1024,
         };
         let p = pack_stacked(&rects, &options).unwrap();
         assert!(p.stacks.len() < rects.len());
@@ -2055,18 +2055,18 @@ mod tests {
                 (f, l, i * 7 % 480, i * 13 % 480, 1 + i % 9, 1 + i % 23)
             })
             .collect();
-        let v5 = packed_cell(&rects, false);
+        let v5 = packed_cell(&rects, 0);
         let mut c = v5.clone();
         c.header.packing = Some(PackingOptions {
             max_size: 1024,
             block: 4,
             trim: true,
-            stack: false,
+            stack: 0,
         });
         let (old, new) = (v5.encode().unwrap(), c.encode().unwrap());
         assert_eq!(old[8..12], BLOCK_BUNDLE_VERSION.to_le_bytes());
         assert!(new.len() < old.len(), "{} {}", new.len(), old.len());
-        // a quad the packing would put elsewhere cannot be written as version 7
+        // a quad the packing would put elsewhere cannot be written as version 7 or 8
         let mut moved = c.clone();
         moved.header.quads[5].rect[0] += 4;
         let e = moved.encode().unwrap_err().to_string();

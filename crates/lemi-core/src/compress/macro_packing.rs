@@ -63,9 +63,10 @@ pub struct PackingOptions {
     /// GPU lemi runs on samples textures of any size; the sides stay multiples of `block`.
     pub trim: bool,
     /// Pack micro-textures of one face in stacks that share blocks (see the module docs; only
-    /// with `block` > 1). Absent in the headers of cells written before it: `false`.
+    /// with `block` > 1): those whose shorter side is at most `stack` texels; 0: no stacks.
+    /// Absent in the headers of cells written before it: 0.
     #[serde(default)]
-    pub stack: bool,
+    pub stack: u32,
 }
 
 impl Default for PackingOptions {
@@ -74,7 +75,7 @@ impl Default for PackingOptions {
             max_size: 4096,
             block: 1,
             trim: false,
-            stack: false,
+            stack: 0,
         }
     }
 }
@@ -541,7 +542,8 @@ const STACK_BUCKET: u32 = 32;
 
 /// Groups rectangles `(face, rect)` (a face's key and a texel rectangle of its image) into stacks
 /// whose members do not overlap, so that padding the stacks to `block`-sided blocks takes fewer
-/// blocks than padding the rectangles. Greedy and deterministic:
+/// blocks than padding the rectangles; a rectangle whose shorter side exceeds `thickest` texels
+/// stays alone. Greedy and deterministic:
 /// 1. rectangles are taken by face, then by decreasing area (ties in input order); each joins
 ///    the stack of its face whose padded blocks its joining lowers most (ties: the older stack),
 ///    provided it overlaps no member and the stack's sides stay within `max_side`, or starts one;
@@ -551,7 +553,12 @@ const STACK_BUCKET: u32 = 32;
 /// Only stacks whose rectangle comes within `block − 1` texels of the other can save a block
 /// (two rectangles `block` or more apart need at least their blocks together), so candidates are
 /// found through a bucket grid of the faces' images.
-pub fn stack_rects(rects: &[(u32, TexelRect)], block: u32, max_side: u32) -> Vec<Stack> {
+pub fn stack_rects(
+    rects: &[(u32, TexelRect)],
+    block: u32,
+    max_side: u32,
+    thickest: u32,
+) -> Vec<Stack> {
     let block = block.max(1);
     let mut order: Vec<usize> = (0..rects.len()).collect();
     order.sort_by_key(|&i| (rects[i].0, std::cmp::Reverse(rects[i].1.texels()), i));
@@ -629,10 +636,16 @@ pub fn stack_rects(rects: &[(u32, TexelRect)], block: u32, max_side: u32) -> Vec
     };
     let fits = |u: &TexelRect| u.width() <= max_side && u.height() <= max_side;
     // 1. every rectangle joins the best stack or starts one
+    // stacks that hold a rectangle thicker than `thickest` take nothing else
+    let mut fixed: Vec<bool> = Vec::new();
     for &i in &order {
         let (face, r) = rects[i];
         let mut best: Option<(i64, usize)> = None;
+        let lone = r.width().min(r.height()) > thickest;
         for id in candidates(&index, &mut stamp, &alive, face, &r) {
+            if lone || fixed[id] {
+                continue;
+            }
             let s = &stacks[id].1;
             let u = s.bbox.union(&r);
             let gain =
@@ -663,6 +676,7 @@ pub fn stack_rects(rects: &[(u32, TexelRect)], block: u32, max_side: u32) -> Vec
                     },
                 ));
                 alive.push(true);
+                fixed.push(lone);
                 register(&mut index, face, None, &r, id);
             }
         }
@@ -675,14 +689,14 @@ pub fn stack_rects(rects: &[(u32, TexelRect)], block: u32, max_side: u32) -> Vec
         let mut merged = false;
         let mut grew = vec![false; stacks.len()];
         for id in 0..stacks.len() {
-            if !alive[id] || !dirty[id] {
+            if !alive[id] || !dirty[id] || fixed[id] {
                 continue;
             }
             let face = stacks[id].0;
             let a = stacks[id].1.bbox;
             let mut best: Option<(i64, usize)> = None;
             for other in candidates(&index, &mut stamp, &alive, face, &a) {
-                if other == id || !alive[other] {
+                if other == id || !alive[other] || fixed[other] {
                     continue;
                 }
                 let b = &stacks[other].1;
@@ -756,8 +770,8 @@ pub fn pack_stacked(
     rects: &[(u32, TexelRect)],
     options: &PackingOptions,
 ) -> Result<StackedPacking, CompressError> {
-    let stacks = if options.stack && options.block > 1 {
-        stack_rects(rects, options.block, options.max_size)
+    let stacks = if options.stack > 0 && options.block > 1 {
+        stack_rects(rects, options.block, options.max_size, options.stack)
     } else {
         rects
             .iter()
