@@ -570,3 +570,22 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn overlapping_rectangles_never_stack_and_many_of_them_stay_cheap() {
+    // a damaged or hostile cell: the reader derives the stacks of whatever rectangles it lists;
+    // each looks at a bounded number of stacks, so 20,000 on one spot take linear time
+    let r = TexelRect {
+        x0: 10,
+        y0: 10,
+        x1: 14,
+        y1: 11,
+    };
+    let rects = vec![(0u32, r); 20_000];
+    let options = PackingOptions {
+        stack: 4096,
+        ..block_opts(4096)
+    };
+    let p = pack_stacked(&rects, &options).unwrap();
+    assert_eq!(p.stacks.len(), rects.len());
+}
