@@ -1975,21 +1975,26 @@ mod tests {
                 },
             )
             .unwrap();
-            for (w, h) in &p.macro_sizes {
-                hasher.update(&w.to_le_bytes());
-                hasher.update(&h.to_le_bytes());
-            }
-            for q in &p.placements {
-                hasher.update(&q.macro_index.to_le_bytes());
-                hasher.update(&q.x.to_le_bytes());
-                hasher.update(&q.y.to_le_bytes());
-                hasher.update(&[q.rotated as u8]);
-            }
+            hash_packing(&mut hasher, &p);
         }
         assert_eq!(
             hasher.finalize().to_hex().as_str(),
             "f0cadab8b5b979ce0fc1dd4af5eda41a33a48a52c768bd65dea70f53de3b32bb"
         );
+    }
+
+    /// Feeds a packing's macro sizes and placements to `hasher` (the pins below).
+    fn hash_packing(hasher: &mut blake3::Hasher, p: &crate::compress::Packing) {
+        for (w, h) in &p.macro_sizes {
+            hasher.update(&w.to_le_bytes());
+            hasher.update(&h.to_le_bytes());
+        }
+        for q in &p.placements {
+            hasher.update(&q.macro_index.to_le_bytes());
+            hasher.update(&q.x.to_le_bytes());
+            hasher.update(&q.y.to_le_bytes());
+            hasher.update(&[q.rotated as u8]);
+        }
     }
 
     /// Version 8 cells derive the stacks as well ([`pack_stacked`]): this pins the stacking and
@@ -2031,16 +2036,7 @@ mod tests {
                 hasher.update(&(*m as u32).to_le_bytes());
             }
         }
-        for (w, h) in &p.packing.macro_sizes {
-            hasher.update(&w.to_le_bytes());
-            hasher.update(&h.to_le_bytes());
-        }
-        for q in &p.packing.placements {
-            hasher.update(&q.macro_index.to_le_bytes());
-            hasher.update(&q.x.to_le_bytes());
-            hasher.update(&q.y.to_le_bytes());
-            hasher.update(&[q.rotated as u8]);
-        }
+        hash_packing(&mut hasher, &p.packing);
         assert_eq!(
             hasher.finalize().to_hex().as_str(),
             "63f94ec12749f73e1df2fbe29d8709ad3112a95d9a8b162c8f6bbf60b4b4b9bb"
