@@ -33,8 +33,8 @@ use lemi_core::cell::ViewCell;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::{
     compress_face, encode_basis, encode_blocks, pack_cell, write_ktx2, BlockFormat, CompressError,
-    CompressOptions, FaceLayers, MacroTexture, MicroTextureOptions, PackingOptions,
-    Supercompression, TextureFormat,
+    CompressOptions, FaceLayers, HiddenTexelOptions, MacroTexture, MicroTextureOptions,
+    PackingOptions, Supercompression, TextureFormat,
 };
 use lemi_core::hlod::{simplify_far_field, HlodOptions};
 use lemi_core::layering::CellPlan;
@@ -160,7 +160,7 @@ impl<'a> Baker<'a> {
             );
         }
 
-        let options = compress_options(params);
+        let options = compress_options(params, cell);
         // face by face: record a face's layers while the previous face is compressed to
         // micro-textures on another thread, then drop its images (at most two faces' layers in
         // memory, not the cell's; the GPU recording and the CPU stages overlap)
@@ -424,10 +424,15 @@ impl<'a> Baker<'a> {
 }
 
 /// The placement's layers of every face as stored.
-/// The compression options a bake with `params` uses (gap filling by the layering, the
-/// micro-grid, block-aligned and trimmed packing for block formats).
-pub fn compress_options(params: &BakeParams) -> CompressOptions {
+/// The compression options a bake with `params` uses for `cell` (gap filling by the layering,
+/// hidden-texel removal by the movement between the cell's layers, the micro-grid, block-aligned
+/// and trimmed packing for block formats).
+pub fn compress_options(params: &BakeParams, cell: &ViewCell) -> CompressOptions {
     CompressOptions {
+        hidden: HiddenTexelOptions {
+            cell_half: Some(cell.half),
+            ..Default::default()
+        },
         gap_fill: Recording::of(params.layering).gap_fill,
         micro: MicroTextureOptions {
             cell_size: params.micro_grid,

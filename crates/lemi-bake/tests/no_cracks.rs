@@ -629,7 +629,7 @@ fn bake_copy_stages(
         });
     }
     // the bake's options, but for what the variant changes
-    let baked = lemi_bake::compress_options(params);
+    let baked = lemi_bake::compress_options(params, &cell);
     let options = CompressOptions {
         micro: MicroTextureOptions {
             merge: copy.merge,

@@ -375,10 +375,12 @@ fn exported_quads_and_texels_are_the_bundles() {
     }
 }
 
-/// A dense cell (as `lemi demo`'s: the city at 512², 64 layers, about 14,000 quads against 1.3 MB
+/// A dense cell (as `lemi demo`'s: the city at 512², 64 layers, about 9,300 quads against 0.86 MB
 /// of PNG): the bytes of its export against its cell file, compressed and plain. The aim
 /// (`docs/EXPORT.md`, "Bytes") is at most 1.1× the cell file; with the quads' positions as f32
-/// the compressed export reaches 1.28× (plain: 1.8×), which this test holds it to. Bytes are
+/// the compressed export reaches 1.33× (plain: 1.8×), which this test holds it to. (It was 1.28×
+/// before hidden-texel removal used the cell's own movement: the textures lost 37 % of their
+/// texels, the quads 34 %, and a quad costs the export more than the cell file.) Bytes are
 /// deterministic, so the bounds are exact properties of the format, not timings.
 #[test]
 fn dense_cells_export_compressed() {
@@ -416,14 +418,14 @@ fn dense_cells_export_compressed() {
         (r, c)
     };
     let (compressed, c) = ratio(&d.join("meshopt"), &[]);
-    assert!(c["quads"].as_u64().unwrap() > 10_000, "dense enough: {c}");
+    assert!(c["quads"].as_u64().unwrap() > 8_000, "dense enough: {c}");
     // draw calls: one per macro-texture and kind (opaque, alpha-tested), as before compression
     let primitives = c["quad_primitives"].as_u64().unwrap();
     assert!(
         primitives <= 2 * c["macro_textures"].as_u64().unwrap(),
         "{c}"
     );
-    assert!(compressed <= 1.3, "{compressed}: {c}");
+    assert!(compressed <= 1.35, "{compressed}: {c}");
     // the quads' vertices and indices: under 40 bytes a quad (92 plain)
     assert!(
         c["quad_bytes"].as_u64().unwrap() < 40 * c["quads"].as_u64().unwrap(),

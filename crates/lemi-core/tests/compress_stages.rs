@@ -393,6 +393,7 @@ fn hidden_texels_next_to_a_hole_or_a_clip_border_texel_are_kept() {
     let mut layers = vec![near, full(12, 'b')];
     let literal = HiddenTexelOptions {
         clip_border_occludes: true,
+        ..Default::default()
     };
     let stats = remove_hidden_texels(&mut layers, &literal).unwrap();
     assert_eq!(stats.removed, 25);

@@ -39,7 +39,10 @@ pub use block_compression::{
 pub use gap_fill::{
     close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
 };
-pub use hidden_texels::{remove_hidden_texels, HiddenTexelOptions, HiddenTexelStats};
+pub use hidden_texels::{
+    remove_hidden_texels, remove_hidden_texels_in_cell, HiddenTexelOptions, HiddenTexelStats,
+    TexelShift,
+};
 pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture, Supercompression};
 pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
@@ -212,7 +215,26 @@ pub fn compress_face(
     } else {
         Ok(GapFillStats::default())
     };
-    let result = gaps.and_then(|g| Ok((g, remove_hidden_texels(&mut f.layers, &options.hidden)?)));
+    let result = gaps.and_then(|g| {
+        let hidden = match options.hidden.cell_half {
+            Some(half) => {
+                let res = f.layers.first().map_or(0, |l| l.res);
+                let mut nearest_first = f.distances.clone();
+                if far_first {
+                    nearest_first.reverse();
+                }
+                let shift = TexelShift::of_face(f.face, half, res);
+                remove_hidden_texels_in_cell(
+                    &mut f.layers,
+                    &nearest_first,
+                    &shift,
+                    &options.hidden,
+                )?
+            }
+            None => remove_hidden_texels(&mut f.layers, &options.hidden)?,
+        };
+        Ok((g, hidden))
+    });
     if far_first {
         f.layers.reverse();
     }
