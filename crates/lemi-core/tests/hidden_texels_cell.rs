@@ -206,6 +206,22 @@ proptest! {
     }
 }
 
+/// `n` layers of `res`² texels: an opaque square `side × side` in the nearest, the farthest opaque
+/// all over, nothing between.
+fn occluder_and_backdrop(res: u32, n: usize, side: std::ops::Range<u32>) -> Vec<LayerImage> {
+    let mut layers = vec![LayerImage::new(res); n];
+    for y in side.clone() {
+        for x in side.clone() {
+            let i = layers[0].index(x, y);
+            layers[0].set_texel(i, OPAQUE);
+        }
+    }
+    for i in 0..layers[n - 1].texel_count() {
+        layers[n - 1].set_texel(i, OPAQUE);
+    }
+    layers
+}
+
 /// A 2D-case street cell (10 × 1 × 10 m) at the paper's settings: an occluder 24 texels wide at
 /// 300 m in front of a full background 10 layers behind (parallax-bound spacing, a third to half a
 /// texel a pair). The paper's rule keeps a 10-texel rim of the background around the occluder's
@@ -219,16 +235,7 @@ fn parallax_bound_layers_lose_more_hidden_texels_than_one_texel_a_pair() {
     assert_eq!((shift.along, shift.across), (5.0, [5.0, 0.5]));
     // parallax-bound layers about 3 % apart, as the placement puts them at 300 m
     let distances: Vec<f64> = (0..11).map(|k| 300.0 * 1.03f64.powi(k)).collect();
-    let mut layers = vec![LayerImage::new(res); 11];
-    for y in 20..44 {
-        for x in 20..44 {
-            let i = layers[0].index(x, y);
-            layers[0].set_texel(i, OPAQUE);
-        }
-    }
-    for i in 0..layers[10].texel_count() {
-        layers[10].set_texel(i, OPAQUE);
-    }
+    let layers = occluder_and_backdrop(res, 11, 20..44);
     let options = HiddenTexelOptions::default();
     let mut paper = layers.clone();
     let by_paper = remove_hidden_texels(&mut paper, &options).unwrap();
@@ -254,16 +261,7 @@ fn layers_moving_more_than_a_texel_keep_what_the_cell_sees() {
     let shift = TexelShift::of_face(face, half, res);
     let distances = [6.0, 9.0];
     assert!(shift.shift(6.0, 9.0, 16, 16)[0] > 2.0);
-    let mut layers = vec![LayerImage::new(res), LayerImage::new(res)];
-    for y in 8..24 {
-        for x in 8..24 {
-            let i = layers[0].index(x, y);
-            layers[0].set_texel(i, OPAQUE);
-        }
-    }
-    for i in 0..layers[1].texel_count() {
-        layers[1].set_texel(i, OPAQUE);
-    }
+    let layers = occluder_and_backdrop(res, 2, 8..24);
     let options = HiddenTexelOptions::default();
     let mut paper = layers.clone();
     remove_hidden_texels(&mut paper, &options).unwrap();
