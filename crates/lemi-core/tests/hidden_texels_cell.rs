@@ -12,6 +12,17 @@ use proptest::prelude::*;
 
 const OPAQUE: [u8; 4] = [200, 100, 50, 255];
 
+/// A deterministic stream of 64-bit values from `seed` (xorshift64).
+fn xorshift(seed: u64) -> impl FnMut() -> u64 {
+    let mut s = seed | 1;
+    move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        s
+    }
+}
+
 /// Viewpoints spread over the cell of half extents `half` around the origin: its 8 corners, the
 /// centres of its 6 sides and a few points inside (deterministic from `seed`).
 fn viewpoints(half: DVec3, seed: u64) -> Vec<DVec3> {
@@ -27,13 +38,8 @@ fn viewpoints(half: DVec3, seed: u64) -> Vec<DVec3> {
             v.push(p);
         }
     }
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
+    let mut bits = xorshift(seed);
+    let mut next = move || (bits() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0;
     for _ in 0..6 {
         v.push(half * DVec3::new(next(), next(), next()));
     }
@@ -117,13 +123,7 @@ fn check_hidden(
 /// average) with a few holes, the farthest is opaque all over, and a few opaque texels are
 /// clip-border texels.
 fn random_layers(res: u32, n: usize, seed: u64) -> Vec<LayerImage> {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        s
-    };
+    let mut next = xorshift(seed);
     (0..n)
         .map(|k| {
             let mut img = LayerImage::new(res);
