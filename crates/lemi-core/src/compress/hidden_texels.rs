@@ -115,10 +115,7 @@ impl TexelShift {
     /// the image centre.
     fn weights(&self, axis: usize) -> Vec<f64> {
         (0..self.res)
-            .map(|i| {
-                let [wx, wy] = self.shift_weights(i, i);
-                [wx, wy][axis]
-            })
+            .map(|i| self.shift_weights(i, i)[axis])
             .collect()
     }
 
