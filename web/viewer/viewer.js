@@ -223,6 +223,8 @@ function lemiQuads(mesh, info) {
   const layer = new Float32Array(4 * n);
   const index = new Uint32Array(6 * n);
   const center = info.reference_viewpoint;
+  // positions are relative to the mesh's node (translated to the reference viewpoint)
+  const origin = new THREE.Vector3().setFromMatrixPosition(mesh.matrixWorld).toArray();
   for (let q = 0; q < n; q++) {
     const P = [0, 1, 2, 3].map((k) => [p[12 * q + 3 * k], p[12 * q + 3 * k + 1], p[12 * q + 3 * k + 2]]);
     // grown texel coordinates, exact on the 1/16-texel grid; the rectangle is their rounding
@@ -233,13 +235,13 @@ function lemiQuads(mesh, info) {
     const r = [Math.min(...xs), Math.min(...ys), Math.max(...xs), Math.max(...ys)];
     // the quad's layer: its face is the dominant axis of its centre seen from the reference
     // viewpoint, its layer the one at that distance
-    const c = [0, 1, 2].map((i) => (P[0][i] + P[2][i]) / 2 - center[i]);
+    const c = [0, 1, 2].map((i) => (P[0][i] + P[2][i]) / 2 + origin[i] - center[i]);
     const axis = [0, 1, 2].reduce((a, i) => (Math.abs(c[i]) > Math.abs(c[a]) ? i : a), 0);
     const face = FACE_NAMES[2 * axis + (c[axis] < 0 ? 1 : 0)];
-    const layers = info.layers[info.faces.indexOf(face)] || [];
+    const distances = (info.layers[info.faces.indexOf(face)] || {}).distance || [];
     let best = 0;
-    layers.forEach((l, k) => {
-      if (Math.abs(l.distance - Math.abs(c[axis])) < Math.abs(layers[best].distance - Math.abs(c[axis]))) best = k;
+    distances.forEach((d, k) => {
+      if (Math.abs(d - Math.abs(c[axis])) < Math.abs(distances[best] - Math.abs(c[axis]))) best = k;
     });
     for (let k = 0; k < 4; k++) {
       texel.set(T[k], 8 * q + 2 * k);

@@ -9,9 +9,11 @@
 //! - **Quads**: node `impostors`, mesh `impostors`, one triangle primitive per macro-texture and
 //!   kind (opaque, alpha-tested; in `header.macros` order), each quad four vertices and two
 //!   triangles `0 1 2, 0 2 3`. The vertices are the ones lemi's runtime draws
-//!   ([`Quad::drawn_vertices`]: the corners in the order of [`Quad::corners`], world coordinates,
-//!   f32, and the macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring
-//!   quads overlap in any renderer). Within a primitive the quads are in the runtime's draw order:
+//!   ([`Quad::drawn_vertices`]: the corners in the order of [`Quad::corners`] and the
+//!   macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring quads overlap
+//!   in any renderer). Positions are relative to the node's translation ([`quad_origin`]); with
+//!   [`ExportGeometry::Meshopt`] they go through the `EXPONENTIAL` filter on a power-of-two grid
+//!   per quad, within [`POSITION_TOLERANCE_TEXELS`] of its layer's texels, else f32. Within a primitive the quads are in the runtime's draw order:
 //!   by cube face, then the nearest layer first (a quad's `layer` counts far to near), ties in the
 //!   cell's order, so depth rejection skips what nearer layers hide. `TEXCOORD_0` holds the grown
 //!   texel coordinates `t` (multiples of 1/16): with [`ExportGeometry::Meshopt`] as u16
@@ -20,7 +22,8 @@
 //!   [`MAX_QUANTIZED_SIDE`]) as f32 `t / side`. A reader rounds `t` to get the quad's texel
 //!   rectangle back.
 //! - **Geometry**: with [`ExportGeometry::Meshopt`] every vertex and index view is compressed
-//!   with `EXT_meshopt_compression` (see `document.rs`), losslessly.
+//!   with `EXT_meshopt_compression` (see `document.rs`), losslessly but for the quads' filtered
+//!   positions.
 //! - **Materials**: `KHR_materials_unlit` (the layers are pre-shaded, final sRGB colours),
 //!   `alphaMode: MASK` with `alphaCutoff` [`QUAD_ALPHA_CUTOFF`] (the runtime's alpha test), or
 //!   `OPAQUE` for the quads whose texels all pass it ([`opaque_quads`]: as the runtime's opaque
@@ -40,13 +43,30 @@
 //!   faces and their layers (distances and borders), resolution, near field, quad and triangle
 //!   counts, the bundle's parameters hash and scene fingerprint.
 
+use glam::DVec3;
 use gltf::json;
 use json::validation::Checked::Valid;
-use lemi_core::bundle::{CellFile, Quad, QUAD_ALPHA_CUTOFF};
+use lemi_core::bundle::{CellFile, LayerInfo, Quad, QUAD_ALPHA_CUTOFF};
 use lemi_core::classify::TriRef;
 use lemi_core::compress::TextureFormat;
 use lemi_core::Scene;
 use serde_json::json;
+
+/// How far an exported quad vertex may lie from the one lemi's runtime draws, in texels of the
+/// quad's layer: a quarter of the growth (`QUAD_GROWTH_TEXELS`, 1/16 texel) by which the runtime
+/// makes neighbouring quads overlap, so that they still overlap by 3/32 texel (and every vertex
+/// stays within 1/64 texel, about 1/64 output pixel at the resolution the layers are made for).
+pub const POSITION_TOLERANCE_TEXELS: f64 = lemi_core::bundle::QUAD_GROWTH_TEXELS / 4.0;
+
+/// The origin of a cell's exported quads (the `impostors` node's translation): the world
+/// reference viewpoint, from which a layer's texels are all the same size, so that the quads'
+/// offsets scale with their tolerance.
+pub fn quad_origin(header: &lemi_core::bundle::CellHeader) -> DVec3 {
+    match &header.object {
+        Some(o) => o.frame.to_world(header.cell.center),
+        None => header.cell.center,
+    }
+}
 
 use crate::document::{extras, Document, GeometryBytes};
 use crate::{ExportError, ExportGeometry, ExportTextures};
@@ -127,6 +147,25 @@ pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
         )
     });
     order
+}
+
+/// A face's layers far to near as three arrays (`distance`, `near_border`, `far_border`, `null`
+/// for ∞), at f32 precision (a distance to 1e-7 of itself, where a layer texel is 2/Res of it):
+/// a third of the JSON of one object per layer with f64 digits.
+fn layer_table(face: &[LayerInfo]) -> serde_json::Value {
+    let column = |f: &dyn Fn(&LayerInfo) -> f64| {
+        face.iter()
+            .map(|l| {
+                let v = f(l);
+                (v < f64::MAX).then_some(v as f32)
+            })
+            .collect::<Vec<_>>()
+    };
+    json!({
+        "distance": column(&|l| l.distance),
+        "near_border": column(&|l| l.near_border),
+        "far_border": column(&|l| l.far_border),
+    })
 }
 
 /// How a cell is exported.
@@ -216,8 +255,10 @@ pub fn export_cell(
         ]);
     }
 
-    // quads: one primitive per macro-texture, in the runtime's order
+    // quads: one primitive per macro-texture, in the runtime's order, relative to the node's
+    // origin (the reference viewpoint, in f32 as the node's translation holds it)
     let quads = &header.quads;
+    let origin = quad_origin(header).as_vec3().as_dvec3();
     let opaque = opaque_quads(file)?;
     let order = quad_order(quads, &opaque);
     let mut primitives = Vec::new();
@@ -237,17 +278,24 @@ pub fn export_cell(
         let (w, h) = (info.width as f32, info.height as f32);
         let n = end - start;
         let mut positions = Vec::with_capacity(4 * n);
+        let mut tolerance = Vec::with_capacity(4 * n);
         let mut uvs = Vec::with_capacity(4 * n);
         let mut indices = Vec::with_capacity(6 * n);
         for &k in &order[start..end] {
             let base = positions.len() as u32;
+            let t = POSITION_TOLERANCE_TEXELS * quads[k].texel_size();
             for (p, uv) in quads[k].drawn_vertices() {
-                positions.push(p);
+                positions.push(
+                    (DVec3::from_array(p.map(f64::from)) - origin)
+                        .as_vec3()
+                        .to_array(),
+                );
+                tolerance.push(t);
                 uvs.push(uv);
             }
             indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         }
-        let position = doc.positions(&positions)?;
+        let (position, _) = doc.positions_within(&positions, &tolerance)?;
         let uv = if quantized {
             // multiples of 1/16 texel from −1/16 to side + 1/16: exact as 16·t + 1
             let texels: Vec<[u16; 2]> = uvs
@@ -284,7 +332,9 @@ pub fn export_cell(
             primitives,
             weights: None,
         });
-        nodes.push(doc.root.push(node("impostors", mesh)));
+        let mut impostors = node("impostors", mesh);
+        impostors.translation = Some(origin.as_vec3().to_array());
+        nodes.push(doc.root.push(impostors));
     }
 
     // near geometry
@@ -359,11 +409,7 @@ pub fn export_cell(
             "near_field": header.near_field,
             "faces": header.faces.iter().map(|f| f.name()).collect::<Vec<_>>(),
             "layer_count": header.layers.iter().map(|l| l.len()).collect::<Vec<_>>(),
-            "layers": header.layers.iter().map(|face| face.iter().map(|l| json!({
-                "distance": l.distance,
-                "near_border": l.near_border,
-                "far_border": if l.far_border >= f64::MAX { None } else { Some(l.far_border) },
-            })).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "layers": header.layers.iter().map(|face| layer_table(face)).collect::<Vec<_>>(),
             "quads": quads.len(),
             "macro_textures": header.macros.len(),
             "near_triangles": near_triangles,

@@ -108,6 +108,7 @@ impl Document {
         count: usize,
         stride: usize,
         kind: ViewKind,
+        filter: Option<&str>,
     ) -> Result<json::Index<json::buffer::View>, ExportError> {
         let (encoded, mode) = match kind {
             ViewKind::Vertices => (encode_vertices(bytes, stride)?, "ATTRIBUTES"),
@@ -128,17 +129,18 @@ impl Document {
         self.geometry_bytes.decoded += bytes.len() as u64;
         self.use_extension(MESHOPT, true);
         let mut ext = json::extensions::buffer::View::default();
-        ext.others.insert(
-            MESHOPT.into(),
-            serde_json::json!({
-                "buffer": 0,
-                "byteOffset": offset,
-                "byteLength": encoded.len(),
-                "byteStride": stride,
-                "count": count,
-                "mode": mode,
-            }),
-        );
+        let mut meshopt = serde_json::json!({
+            "buffer": 0,
+            "byteOffset": offset,
+            "byteLength": encoded.len(),
+            "byteStride": stride,
+            "count": count,
+            "mode": mode,
+        });
+        if let Some(filter) = filter {
+            meshopt["filter"] = filter.into();
+        }
+        ext.others.insert(MESHOPT.into(), meshopt);
         Ok(self.root.push(json::buffer::View {
             buffer: json::Index::new(1),
             byte_length: USize64::from(bytes.len()),
@@ -159,10 +161,11 @@ impl Document {
         count: usize,
         stride: usize,
         kind: ViewKind,
+        filter: Option<&str>,
     ) -> Result<json::Index<json::buffer::View>, ExportError> {
         match (self.geometry, kind) {
             (ExportGeometry::Meshopt, ViewKind::Vertices | ViewKind::Indices) => {
-                self.compressed_view(bytes, count, stride, kind)
+                self.compressed_view(bytes, count, stride, kind, filter)
             }
             _ => Ok(self.view(bytes, kind)),
         }
@@ -180,8 +183,27 @@ impl Document {
         normalized: bool,
         bounds: Option<(Vec<f32>, Vec<f32>)>,
     ) -> Result<json::Index<json::Accessor>, ExportError> {
+        self.filtered_accessor(
+            bytes, kind, count, component, type_, normalized, bounds, None,
+        )
+    }
+
+    /// [`Document::accessor`] whose compressed view carries a meshopt `filter` the reader
+    /// applies after decoding (the bytes are the filter's encoding).
+    #[allow(clippy::too_many_arguments)]
+    fn filtered_accessor(
+        &mut self,
+        bytes: &[u8],
+        kind: ViewKind,
+        count: usize,
+        component: json::accessor::ComponentType,
+        type_: json::accessor::Type,
+        normalized: bool,
+        bounds: Option<(Vec<f32>, Vec<f32>)>,
+        filter: Option<&str>,
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         let view = match bytes.len().checked_div(count) {
-            Some(stride) => self.data_view(bytes, count, stride, kind)?,
+            Some(stride) => self.data_view(bytes, count, stride, kind, filter)?,
             None => self.view(bytes, kind),
         };
         let (min, max) = match bounds {
@@ -209,14 +231,6 @@ impl Document {
         &mut self,
         p: &[[f32; 3]],
     ) -> Result<json::Index<json::Accessor>, ExportError> {
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        for v in p {
-            for i in 0..3 {
-                lo[i] = lo[i].min(v[i]);
-                hi[i] = hi[i].max(v[i]);
-            }
-        }
         self.accessor(
             bytemuck_f32(p.iter().flatten()).as_slice(),
             ViewKind::Vertices,
@@ -224,8 +238,40 @@ impl Document {
             json::accessor::ComponentType::F32,
             json::accessor::Type::Vec3,
             false,
-            Some((lo.to_vec(), hi.to_vec())),
+            Some(bounds(p)),
         )
+    }
+
+    /// `POSITION` within `tolerance[i]` of `p[i]` (per vertex, in the same units): with
+    /// [`ExportGeometry::Meshopt`] each vertex is stored as integers on a grid of step `2^e`,
+    /// the largest power of two not above twice its tolerance, through `EXT_meshopt_compression`'s
+    /// `EXPONENTIAL` filter ([`exponential_filter`]), which a reader decodes to f32 `m · 2^e`;
+    /// else (or where a coordinate is too large for 24-bit mantissas on that grid) as f32, exactly.
+    /// Returns the accessor and the positions a reader decodes.
+    pub(crate) fn positions_within(
+        &mut self,
+        p: &[[f32; 3]],
+        tolerance: &[f64],
+    ) -> Result<(json::Index<json::Accessor>, Vec<[f32; 3]>), ExportError> {
+        let filtered = match self.geometry {
+            ExportGeometry::Meshopt => exponential_filter(p, tolerance),
+            ExportGeometry::Plain => None,
+        };
+        let Some((words, decoded)) = filtered else {
+            return Ok((self.positions(p)?, p.to_vec()));
+        };
+        let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+        let accessor = self.filtered_accessor(
+            &bytes,
+            ViewKind::Vertices,
+            p.len(),
+            json::accessor::ComponentType::F32,
+            json::accessor::Type::Vec3,
+            false,
+            Some(bounds(&decoded)),
+            Some("EXPONENTIAL"),
+        )?;
+        Ok((accessor, decoded))
     }
 
     /// `NORMAL`: three f32 per vertex.
@@ -490,6 +536,63 @@ fn encode_triangles(bytes: &[u8], stride: usize) -> Result<Vec<u8>, ExportError>
         .map_err(|e| ExportError::Gltf(format!("meshopt index encoding: {e}")))
 }
 
+/// The component-wise bounds of `p`, which glTF requires of `POSITION`.
+fn bounds(p: &[[f32; 3]]) -> (Vec<f32>, Vec<f32>) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for v in p {
+        for i in 0..3 {
+            lo[i] = lo[i].min(v[i]);
+            hi[i] = hi[i].max(v[i]);
+        }
+    }
+    (lo.to_vec(), hi.to_vec())
+}
+
+/// `EXT_meshopt_compression`'s `EXPONENTIAL` filter, encoded: each f32 component as one 32-bit
+/// word, a signed 8-bit exponent `e` in the top byte and a signed 24-bit mantissa `m` below it,
+/// which a reader decodes as `m · 2^e` (exactly, in f32). The exponent is chosen per vertex from
+/// its tolerance `t`: the largest `e` with `2^e ≤ 2t`, so that rounding to the grid moves no
+/// component by more than `t`. Neighbouring vertices with the same tolerance share the grid,
+/// which is what lets the vertex codec predict them. Returns the words and the decoded
+/// positions, or `None` when a tolerance is not positive and finite or a coordinate needs more
+/// than 24 bits on its grid (then the caller stores f32).
+pub(crate) fn exponential_filter(
+    p: &[[f32; 3]],
+    tolerance: &[f64],
+) -> Option<(Vec<u32>, Vec<[f32; 3]>)> {
+    if p.len() != tolerance.len() {
+        return None;
+    }
+    let mut words = Vec::with_capacity(3 * p.len());
+    let mut decoded = Vec::with_capacity(p.len());
+    for (v, &t) in p.iter().zip(tolerance) {
+        if !(t.is_finite() && t > 0.0) {
+            return None;
+        }
+        // exponents far from 0 keep every decoded value a normal f32 (exact); a grid finer
+        // than needed is fine, a coarser one is not
+        let e = (2.0 * t).log2().floor().min(100.0);
+        if e < -100.0 {
+            return None;
+        }
+        let e = e as i32;
+        let step = 2f64.powi(e);
+        let mut out = [0f32; 3];
+        for (c, o) in v.iter().zip(&mut out) {
+            let m = (*c as f64 / step).round();
+            if m.is_nan() || m.abs() >= (1 << 23) as f64 {
+                return None;
+            }
+            let m = m as i32;
+            words.push(((e as u32) << 24) | (m as u32 & 0x00ff_ffff));
+            *o = (m as f64 * step) as f32;
+        }
+        decoded.push(out);
+    }
+    Some((words, decoded))
+}
+
 fn bytemuck_f32<'a>(values: impl Iterator<Item = &'a f32>) -> Vec<u8> {
     values.flat_map(|v| v.to_le_bytes()).collect()
 }
@@ -499,4 +602,59 @@ pub(crate) fn extras(value: &serde_json::Value) -> Result<json::Extras, ExportEr
     let raw = serde_json::value::to_raw_value(value)
         .map_err(|e| ExportError::Gltf(format!("serializing extras: {e}")))?;
     Ok(Some(raw))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::exponential_filter;
+    use proptest::prelude::*;
+
+    /// What a reader does with a word of the `EXPONENTIAL` filter (the extension's decoder:
+    /// sign-extend the low 24 bits, the top byte is the signed exponent).
+    fn decode(w: u32) -> f32 {
+        let m = ((w << 8) as i32) >> 8;
+        let e = (w as i32) >> 24;
+        (m as f64 * 2f64.powi(e)) as f32
+    }
+
+    proptest! {
+        /// Every decoded component is within its vertex's tolerance, the words decode to the
+        /// positions returned, and vertices of one tolerance share one grid.
+        #[test]
+        fn filtered_positions_stay_within_tolerance(
+            p in prop::collection::vec(prop::array::uniform3(-1.0e4f32..1.0e4), 1..40),
+            t in 1.0e-4f64..10.0,
+        ) {
+            let tol: Vec<f64> = p.iter().enumerate().map(|(i, _)| t * (1 + i % 3) as f64).collect();
+            let (words, decoded) = exponential_filter(&p, &tol).expect("in range");
+            prop_assert_eq!(words.len(), 3 * p.len());
+            for (i, v) in p.iter().enumerate() {
+                for c in 0..3 {
+                    let got = decode(words[3 * i + c]);
+                    prop_assert_eq!(got, decoded[i][c]);
+                    let off = (got as f64 - v[c] as f64).abs();
+                    // the grid's rounding plus the f32 rounding of the decoded value
+                    prop_assert!(off <= tol[i] + 1e-7 * v[c].abs() as f64, "{} vs {}", got, v[c]);
+                }
+            }
+            for i in 3..p.len() {
+                prop_assert_eq!(words[3 * i] >> 24, words[3 * (i - 3)] >> 24);
+            }
+        }
+    }
+
+    #[test]
+    fn unusable_tolerances_and_huge_coordinates_fall_back() {
+        let p = [[1.0f32, 2.0, 3.0]];
+        for t in [0.0, -1.0, f64::NAN, f64::INFINITY, 1e-40] {
+            assert!(exponential_filter(&p, &[t]).is_none(), "{t}");
+        }
+        // 2^30 on a grid of 2^-4: a 34-bit mantissa
+        assert!(exponential_filter(&[[1.0e9, 0.0, 0.0]], &[0.05]).is_none());
+        assert!(exponential_filter(&[[f32::NAN, 0.0, 0.0]], &[0.05]).is_none());
+        assert!(
+            exponential_filter(&p, &[0.1, 0.1]).is_none(),
+            "one tolerance a vertex"
+        );
+    }
 }

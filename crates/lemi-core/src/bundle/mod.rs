@@ -282,6 +282,17 @@ impl Quad {
             (pos.as_vec3().to_array(), [t.x as f32, t.y as f32])
         })
     }
+
+    /// The world size of one of the quad's texels: the shorter of its edges' lengths divided
+    /// by their texel counts (a layer's texels are squares, so the two agree up to f32 rounding;
+    /// an object frame may stretch one axis).
+    pub fn texel_size(&self) -> f64 {
+        use glam::DVec3;
+        let p = self.corners.map(|c| DVec3::from_array(c.map(f64::from)));
+        let w = self.texels[2].saturating_sub(self.texels[0]).max(1) as f64;
+        let h = self.texels[3].saturating_sub(self.texels[1]).max(1) as f64;
+        (p[1].distance(p[0]) / w).min(p[3].distance(p[0]) / h)
+    }
 }
 
 /// A macro-texture: stored as a blob named `name`, a PNG or (version 4) a KTX2 file in the cell's
