@@ -151,13 +151,15 @@ pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
 
 /// A face's layers far to near as three arrays (`distance`, `near_border`, `far_border`, `null`
 /// for ∞), at f32 precision (a distance to 1e-7 of itself, where a layer texel is 2/Res of it):
-/// a third of the JSON of one object per layer with f64 digits.
+/// 7.5 KB for 4 × 64 layers, against 26 KB as one object per layer with all of f64's digits.
 fn layer_table(face: &[LayerInfo]) -> serde_json::Value {
     let column = |f: &dyn Fn(&LayerInfo) -> f64| {
         face.iter()
             .map(|l| {
+                // the shortest decimal that reads back as the f32 (serde_json writes an
+                // f32 widened to f64 with all of the f64's digits)
                 let v = f(l);
-                (v < f64::MAX).then_some(v as f32)
+                (v < f64::MAX).then(|| (v as f32).to_string().parse::<f64>().unwrap_or(v))
             })
             .collect::<Vec<_>>()
     };
