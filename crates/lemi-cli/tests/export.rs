@@ -445,6 +445,38 @@ fn exported_quads_and_texels_are_the_bundles() {
     }
 }
 
+/// An object bundle (`lemi bake-object`: planar layers facing a box cell, the quads' corners
+/// mapped back to the world by the object's frame) exports the same way: its quads relative to
+/// the reference viewpoint's world position, within the tolerance of their texels.
+#[test]
+fn an_object_bundle_exports_its_quads() {
+    let d = tmp("export", "object");
+    let bundle = d.join("b");
+    let o = lemi(&[
+        "bake-object",
+        "builtin:city:20k:3",
+        "-o",
+        bundle.to_str().unwrap(),
+        // city buildings between x = 100 and 300 m, a box cell on the avenue 50 m before them
+        "--object",
+        "100,0.5,-100,300,80,100",
+        "--view-cell",
+        "box:40,1,-5,50,4,5",
+        "--output-width",
+        "256",
+    ]);
+    assert!(o.status.success(), "bake-object: {}", stderr(&o));
+    let out = d.join("gltf");
+    let e = export(&bundle, &out, &[]);
+    assert!(e.status.success(), "{}", stderr(&e));
+    let file = Bundle::open(&bundle)
+        .unwrap()
+        .cell("0_0_0".parse().unwrap())
+        .unwrap();
+    assert!(file.header.object.is_some() && file.header.quads.len() > 10);
+    assert_round_trip(&bundle, &out);
+}
+
 /// A dense cell (as `lemi demo`'s: the city at 512², 64 layers, about 9,300 quads against 0.86 MB
 /// of PNG): the bytes of its export against its cell file, compressed and plain. The aim
 /// (`docs/EXPORT.md`, "Bytes") is at most 1.1× the cell file; with the quads' positions through
