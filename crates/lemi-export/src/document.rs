@@ -171,27 +171,11 @@ impl Document {
         }
     }
 
-    /// A tightly packed accessor over a new buffer view holding `bytes`.
+    /// A tightly packed accessor over a new buffer view holding `bytes`; a compressed view
+    /// carries the meshopt `filter` the reader applies after decoding (the bytes are then the
+    /// filter's encoding).
     #[allow(clippy::too_many_arguments)]
     fn accessor(
-        &mut self,
-        bytes: &[u8],
-        kind: ViewKind,
-        count: usize,
-        component: json::accessor::ComponentType,
-        type_: json::accessor::Type,
-        normalized: bool,
-        bounds: Option<(Vec<f32>, Vec<f32>)>,
-    ) -> Result<json::Index<json::Accessor>, ExportError> {
-        self.filtered_accessor(
-            bytes, kind, count, component, type_, normalized, bounds, None,
-        )
-    }
-
-    /// [`Document::accessor`] whose compressed view carries a meshopt `filter` the reader
-    /// applies after decoding (the bytes are the filter's encoding).
-    #[allow(clippy::too_many_arguments)]
-    fn filtered_accessor(
         &mut self,
         bytes: &[u8],
         kind: ViewKind,
@@ -239,6 +223,7 @@ impl Document {
             json::accessor::Type::Vec3,
             false,
             Some(bounds(p)),
+            None,
         )
     }
 
@@ -261,7 +246,7 @@ impl Document {
             return Ok((self.positions(p)?, p.to_vec()));
         };
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        let accessor = self.filtered_accessor(
+        let accessor = self.accessor(
             &bytes,
             ViewKind::Vertices,
             p.len(),
@@ -287,6 +272,7 @@ impl Document {
             json::accessor::Type::Vec3,
             false,
             None,
+            None,
         )
     }
 
@@ -302,6 +288,7 @@ impl Document {
             json::accessor::ComponentType::F32,
             json::accessor::Type::Vec2,
             false,
+            None,
             None,
         )
     }
@@ -323,6 +310,7 @@ impl Document {
             json::accessor::Type::Vec2,
             false,
             None,
+            None,
         )
     }
 
@@ -339,6 +327,7 @@ impl Document {
             json::accessor::ComponentType::U8,
             json::accessor::Type::Vec4,
             true,
+            None,
             None,
         )
     }
@@ -363,6 +352,7 @@ impl Document {
                 json::accessor::Type::Scalar,
                 false,
                 None,
+                None,
             )
         } else {
             let bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
@@ -373,6 +363,7 @@ impl Document {
                 json::accessor::ComponentType::U32,
                 json::accessor::Type::Scalar,
                 false,
+                None,
                 None,
             )
         }
