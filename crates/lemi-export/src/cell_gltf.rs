@@ -13,7 +13,8 @@
 //!   macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring quads overlap
 //!   in any renderer). Positions are relative to the node's translation ([`quad_origin`]); with
 //!   [`ExportGeometry::Meshopt`] they go through the `EXPONENTIAL` filter on a power-of-two grid
-//!   per quad, within [`POSITION_TOLERANCE_TEXELS`] of its layer's texels, else f32. Within a primitive the quads are in the runtime's draw order:
+//!   per quad, within [`POSITION_TOLERANCE_TEXELS`] of its layer's texels, else f32. Within a
+//!   primitive the quads are in the runtime's draw order:
 //!   by cube face, then the nearest layer first (a quad's `layer` counts far to near), ties in the
 //!   cell's order, so depth rejection skips what nearer layers hide. `TEXCOORD_0` holds the grown
 //!   texel coordinates `t` (multiples of 1/16): with [`ExportGeometry::Meshopt`] as u16
@@ -52,6 +53,9 @@ use lemi_core::compress::TextureFormat;
 use lemi_core::Scene;
 use serde_json::json;
 
+use crate::document::{extras, Document, GeometryBytes};
+use crate::{ExportError, ExportGeometry, ExportTextures};
+
 /// How far an exported quad vertex may lie from the one lemi's runtime draws, in texels of the
 /// quad's layer: a quarter of the growth (`QUAD_GROWTH_TEXELS`, 1/16 texel) by which the runtime
 /// makes neighbouring quads overlap, so that they still overlap by 3/32 texel (and every vertex
@@ -67,9 +71,6 @@ pub fn quad_origin(header: &lemi_core::bundle::CellHeader) -> DVec3 {
         None => header.cell.center,
     }
 }
-
-use crate::document::{extras, Document, GeometryBytes};
-use crate::{ExportError, ExportGeometry, ExportTextures};
 
 /// The name of the extension for unlit materials.
 pub const UNLIT: &str = "KHR_materials_unlit";
@@ -297,7 +298,7 @@ pub fn export_cell(
             }
             indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         }
-        let (position, _) = doc.positions_within(&positions, &tolerance)?;
+        let position = doc.positions_within(&positions, &tolerance)?;
         let uv = if quantized {
             // multiples of 1/16 texel from −1/16 to side + 1/16: exact as 16·t + 1
             let texels: Vec<[u16; 2]> = uvs

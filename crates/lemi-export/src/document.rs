@@ -232,21 +232,20 @@ impl Document {
     /// the largest power of two not above twice its tolerance, through `EXT_meshopt_compression`'s
     /// `EXPONENTIAL` filter ([`exponential_filter`]), which a reader decodes to f32 `m · 2^e`;
     /// else (or where a coordinate is too large for 24-bit mantissas on that grid) as f32, exactly.
-    /// Returns the accessor and the positions a reader decodes.
     pub(crate) fn positions_within(
         &mut self,
         p: &[[f32; 3]],
         tolerance: &[f64],
-    ) -> Result<(json::Index<json::Accessor>, Vec<[f32; 3]>), ExportError> {
+    ) -> Result<json::Index<json::Accessor>, ExportError> {
         let filtered = match self.geometry {
             ExportGeometry::Meshopt => exponential_filter(p, tolerance),
             ExportGeometry::Plain => None,
         };
         let Some((words, decoded)) = filtered else {
-            return Ok((self.positions(p)?, p.to_vec()));
+            return self.positions(p);
         };
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        let accessor = self.accessor(
+        self.accessor(
             &bytes,
             ViewKind::Vertices,
             p.len(),
@@ -255,8 +254,7 @@ impl Document {
             false,
             Some(bounds(&decoded)),
             Some("EXPONENTIAL"),
-        )?;
-        Ok((accessor, decoded))
+        )
     }
 
     /// `NORMAL`: three f32 per vertex.
