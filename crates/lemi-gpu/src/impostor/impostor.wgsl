@@ -7,15 +7,13 @@
 // targets as render.wgsl: Target 0: colour, alpha 1 where drawn. Target 1: R32Uint holding the
 // bits of the f32 linear view depth.
 //
-// The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle); the sampler
-// binding stays in the layout, unused (a sampler's filtering would mix micro-textures). Where a texel spans less than two
-// pixels and globals.params.z is 1, the colour is the mean of an n×n grid of such fetches over the
-// pixel's footprint (n = ⌈2 · texels per pixel⌉, at most 4: the footprint sampled at twice the
-// texel rate; opaque texels only, averaged in linear light: globals.params.w is 1 where the texels
-// hold sRGB-encoded bytes), while the alpha test still takes the one texel under the pixel's
-// centre: coverage stays exact.
-// Group 1 holds the atlas page of macro-textures at bindings 3 and 4 so that they never alias the material
-// bindings 0..=2 the shading module declares (unused here).
+// The texel is fetched with textureLoad (nearest, clamped to the quad's rectangle). Where a texel
+// spans less than two pixels and FOOTPRINT is set, the colour is filtered instead (quad_color)
+// from bilinear fetches that never leave the quad's rectangle, while the alpha test still takes the
+// one texel under the pixel's centre: coverage stays exact.
+// Group 1 holds the atlas page of macro-textures at bindings 3..=6 so that they never alias the
+// material bindings 0..=2 the shading module declares (unused here): the page as stored (3), a
+// bilinear sampler (4), the page decoded to linear light (5) and the page's parameters (6).
 
 struct QuadIn {
     @location(0) position: vec3<f32>,
@@ -40,8 +38,20 @@ struct QuadFragmentOut {
     @location(1) depth: u32,
 };
 
+struct PageParams {
+    // x: 1 where transparent texels are transparent black, so a filtered fetch's colour over its
+    // alpha is the mean of the opaque texels it mixed (RGBA8 pages, BC1); 0 where they carry the
+    // colour of their neighbours (BC7) and the fetch's colour is taken as it is.
+    flags: vec4<f32>,
+};
+
+// Whether minified quads are filtered (TexelFilter::Footprint), fixed per pipeline.
+override FOOTPRINT: bool = true;
+
 @group(1) @binding(3) var macro_texture: texture_2d<f32>;
 @group(1) @binding(4) var macro_sampler: sampler;
+@group(1) @binding(5) var macro_linear: texture_2d<f32>;
+@group(1) @binding(6) var<uniform> page: PageParams;
 
 @vertex
 fn vs_quad(v: QuadIn) -> QuadOut {
@@ -65,49 +75,63 @@ fn texel_at(in: QuadOut, uv: vec2<f32>) -> vec4<f32> {
     return textureLoad(macro_texture, vec2<i32>(texel) + vec2<i32>(in.offset), 0);
 }
 
-fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
-    let lo = c / 12.92;
-    let hi = pow((c + vec3<f32>(0.055)) / 1.055, vec3<f32>(2.4));
-    return select(hi, lo, c <= vec3<f32>(0.04045));
-}
-
 fn linear_to_srgb(c: vec3<f32>) -> vec3<f32> {
     let lo = c * 12.92;
     let hi = 1.055 * pow(c, vec3<f32>(1.0 / 2.4)) - vec3<f32>(0.055);
     return select(hi, lo, c <= vec3<f32>(0.0031308));
 }
 
+// One bilinear fetch in linear light at texel-space point p of the quad's macro-texture, moved to
+// the nearest texel corner when `snap` (then it is the exact mean of the 2×2 texels around it) and
+// clamped to half a texel inside the quad's rectangle, so it never mixes in a texel of another
+// micro-texture or of the transparent gap (a one-texel-wide rectangle gives its texels exactly).
+fn filtered_tap(in: QuadOut, p: vec2<f32>, snap: bool, size: vec2<f32>) -> vec4<f32> {
+    var q = p;
+    if (snap) {
+        q = round(p);
+    }
+    q = clamp(q, in.rect.xy + vec2<f32>(0.5), in.rect.zw - vec2<f32>(0.5));
+    return textureSampleLevel(macro_linear, macro_sampler, (q + vec2<f32>(in.offset)) / size, 0.0);
+}
+
 // The colour a pixel shows: its centre texel `centre` where a texel spans at least two pixels
-// (or filtering is off), else the mean over the pixel's footprint (texel offsets `dx`, `dy` per
-// pixel along the screen axes) of the opaque texels an n×n grid of sample points lands on.
+// (or filtering is off), else a filter of its footprint (texel offsets `dx`, `dy` per pixel along
+// the screen axes, s texels across at most), averaged in linear light over opaque texels only:
+// - s ≤ 1: one bilinear fetch at the pixel's centre (the tent filter of texture hardware);
+// - 1 < s ≤ 2: one fetch at the texel corner nearest the centre, the mean of the 2×2 texels
+//   around it;
+// - s > 2: four such fetches at the centres of the footprint's quarters, the mean of up to 4×4
+//   texels (exact up to s = 4; beyond, the footprint is sampled, not covered).
 fn quad_color(in: QuadOut, centre: vec4<f32>, dx: vec2<f32>, dy: vec2<f32>) -> vec3<f32> {
     let s = max(length(dx), length(dy));
-    if (globals.params.z < 0.5 || !(s > 0.5)) {
+    if (!FOOTPRINT || !(s > 0.5)) {
         return centre.rgb;
     }
-    let n = i32(min(ceil(2.0 * s), 4.0));
-    let encoded = globals.params.w > 0.5;
-    var sum = vec3<f32>(0.0);
-    var count = 0.0;
-    for (var j = 0; j < n; j++) {
-        for (var i = 0; i < n; i++) {
-            let o = (vec2<f32>(f32(i), f32(j)) + vec2<f32>(0.5)) / f32(n) - vec2<f32>(0.5);
-            let t = texel_at(in, in.uv + o.x * dx + o.y * dy);
-            if (t.a >= globals.params.y) {
-                var c = t.rgb;
-                if (encoded) {
-                    c = srgb_to_linear(c);
-                }
-                sum += c;
-                count += 1.0;
-            }
+    // The fetches run in a loop of as many turns as the pixel needs: a software rasterizer runs
+    // both sides of a branch for a group of pixels, but leaves a loop once no pixel of the group
+    // needs another turn, so magnified quads pay for no fetch and a group of pixels whose texels
+    // span at most two pixels pays for one.
+    let taps = select(1, 4, s > 2.0);
+    let size = vec2<f32>(textureDimensions(macro_linear));
+    var sum = vec4<f32>(0.0);
+    for (var k = 0; k < taps; k++) {
+        var p = in.uv;
+        if (taps == 4) {
+            // the centres of the footprint's quarters: ±¼ of it along each screen axis
+            let o = vec2<f32>(f32(k & 1), f32(k >> 1u)) - vec2<f32>(0.5);
+            p += 0.5 * (o.x * dx + o.y * dy);
         }
+        sum += filtered_tap(in, p, s > 1.0, size);
     }
-    if (count < 0.5) {
-        return centre.rgb;
+    sum /= f32(taps);
+    var mean = sum.rgb;
+    if (page.flags.x > 0.5) {
+        if (!(sum.a > 1.0 / 256.0)) {
+            return centre.rgb;
+        }
+        mean = sum.rgb / sum.a;
     }
-    var mean = sum / count;
-    if (encoded) {
+    if (globals.params.w > 0.5) {
         mean = linear_to_srgb(mean);
     }
     return mean;

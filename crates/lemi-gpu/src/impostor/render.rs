@@ -72,10 +72,12 @@ pub struct ImpostorRenderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     near_pipelines: crate::renderer::GeometryPipelines,
-    /// Quads some of whose texels fail the alpha test (`fs_quad`, with `discard`).
-    quad_pipeline: wgpu::RenderPipeline,
-    /// Quads all of whose texels pass it (`fs_quad_opaque`, no `discard`).
-    opaque_pipeline: wgpu::RenderPipeline,
+    /// Quad pipelines by filter ([`TexelFilter::Nearest`], [`TexelFilter::Footprint`]: the
+    /// shader's `FOOTPRINT` constant, so the texel filter costs nothing where it is off, not even
+    /// on a software rasterizer, which runs both sides of a branch) and kind: quads some of whose
+    /// texels fail the alpha test (`fs_quad`, with `discard`) and quads all of whose texels pass
+    /// it (`fs_quad_opaque`, no `discard`).
+    quad_pipelines: [QuadPipelines; 2],
     /// The macro-texture format this renderer's quad pipelines expect ([`macro_format`]);
     /// `Rgba8Unorm` means the quads are drawn through the colour target's linear view.
     macro_format: wgpu::TextureFormat,
@@ -85,6 +87,12 @@ pub struct ImpostorRenderer {
     targets: Mutex<Option<Targets>>,
     last_gpu: GpuTime,
     texel_filter: TexelFilter,
+}
+
+/// The two quad pipelines of one texel filter.
+struct QuadPipelines {
+    alpha_tested: wgpu::RenderPipeline,
+    opaque: wgpu::RenderPipeline,
 }
 
 impl ImpostorRenderer {
@@ -131,7 +139,7 @@ impl ImpostorRenderer {
                     write_mask: wgpu::ColorWrites::ALL,
                 });
             }
-            let quad_pipeline_for = |label: &str, entry_point: &str| {
+            let quad_pipeline_for = |label: &str, entry_point: &str, footprint: bool| {
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some(label),
                     layout: Some(&quad_layout),
@@ -147,16 +155,28 @@ impl ImpostorRenderer {
                     fragment: Some(wgpu::FragmentState {
                         module: &quad_module,
                         entry_point: Some(entry_point),
-                        compilation_options: Default::default(),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &[("FOOTPRINT", f64::from(u8::from(footprint)))],
+                            ..Default::default()
+                        },
                         targets: &quad_targets,
                     }),
                     multiview_mask: None,
                     cache: None,
                 })
             };
-            let quad_pipeline = quad_pipeline_for("lemi impostor renderer: quads", "fs_quad");
-            let opaque_pipeline =
-                quad_pipeline_for("lemi impostor renderer: opaque quads", "fs_quad_opaque");
+            let quad_pipelines = [false, true].map(|footprint| QuadPipelines {
+                alpha_tested: quad_pipeline_for(
+                    "lemi impostor renderer: quads",
+                    "fs_quad",
+                    footprint,
+                ),
+                opaque: quad_pipeline_for(
+                    "lemi impostor renderer: opaque quads",
+                    "fs_quad_opaque",
+                    footprint,
+                ),
+            });
             let globals = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("lemi impostor globals"),
                 size: std::mem::size_of::<ShadingGlobals>() as u64,
@@ -175,8 +195,7 @@ impl ImpostorRenderer {
                 device: gpu.device.clone(),
                 queue: gpu.queue.clone(),
                 near_pipelines,
-                quad_pipeline,
-                opaque_pipeline,
+                quad_pipelines,
                 macro_format,
                 globals,
                 globals_group,
@@ -291,10 +310,9 @@ impl ImpostorRenderer {
         }
         let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
         globals.params[1] = QUAD_ALPHA_CUTOFF;
-        // impostor.wgsl: z filters minified quads, w says the texels arrive sRGB-encoded (the
-        // Rgba8Unorm and block-format views that pass bytes through), so the mean is taken in
-        // linear light
-        globals.params[2] = f32::from(u8::from(self.texel_filter == TexelFilter::Footprint));
+        // impostor.wgsl: w says the quads draw into the linear view of the colour target (their
+        // texels pass through as sRGB-encoded bytes), so a filtered colour, taken in linear light,
+        // is encoded by the shader
         globals.params[3] = f32::from(u8::from(!self.macro_format.is_srgb()));
         let cells = &parts.cells;
         for w in parts
@@ -468,10 +486,12 @@ impl ImpostorRenderer {
                         continue;
                     }
                     if pipeline != Some(d.opaque) {
+                        let pipelines = &self.quad_pipelines
+                            [usize::from(self.texel_filter == TexelFilter::Footprint)];
                         pass.set_pipeline(if d.opaque {
-                            &self.opaque_pipeline
+                            &pipelines.opaque
                         } else {
-                            &self.quad_pipeline
+                            &pipelines.alpha_tested
                         });
                         pipeline = Some(d.opaque);
                     }

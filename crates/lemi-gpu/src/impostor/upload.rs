@@ -16,38 +16,84 @@ use lemi_core::Scene;
 use wgpu::util::DeviceExt;
 
 use super::atlas::{Atlas, Place};
-use super::layout::{Bounds, ImpostorCellData, QuadDraw, QuadGeometry};
+use super::layout::{Bounds, ImpostorCellData, QuadDraw, QuadGeometry, QUAD_ALPHA_CUTOFF};
 #[cfg(doc)]
 use super::ImpostorRenderer;
 use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
 use crate::{Gpu, GpuError};
 
-/// Group 1 of the quad pipeline: an atlas page of macro-textures (binding 3) and its nearest
-/// sampler (binding 4).
+/// Group 1 of the quad pipeline: an atlas page of macro-textures as stored (binding 3, fetched
+/// texel by texel), its bilinear sampler (binding 4), the same page decoded to linear light
+/// (binding 5, the filtered fetches of minified quads) and the page's [`PageParams`] (binding 6).
 /// Created by both [`ImpostorCell::begin_upload`] and [`ImpostorRenderer::new`]; wgpu deduplicates
 /// equal layouts, and WebGPU makes equal layouts compatible in any case.
 pub(super) fn macro_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let texture = |binding, filterable| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    };
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("lemi macro-texture"),
         entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 3,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-                count: None,
-            },
+            texture(3, false),
             wgpu::BindGroupLayoutEntry {
                 binding: 4,
                 visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+            texture(5, true),
+            wgpu::BindGroupLayoutEntry {
+                binding: 6,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: wgpu::BufferSize::new(16),
+                },
                 count: None,
             },
         ],
     })
+}
+
+/// What the quad shader needs to know of an atlas page (binding 6 of [`macro_layout`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct PageParams {
+    /// x: 1 where the page's transparent texels are transparent black (RGBA8 pages, made so at
+    /// upload, and BC1, whose transparent index decodes so), so that a bilinear fetch's colour
+    /// over its alpha is the mean of the opaque texels it covers; 0 where they carry a colour of
+    /// their own (BC7: the mean of their block's opaque texels, chosen by the encoder), and the
+    /// fetch's colour is taken as it is.
+    flags: [f32; 4],
+}
+
+/// Whether transparent texels of `format` pages are transparent black ([`PageParams`]).
+fn transparent_black(format: wgpu::TextureFormat) -> bool {
+    !matches!(
+        format,
+        wgpu::TextureFormat::Bc7RgbaUnorm | wgpu::TextureFormat::Bc7RgbaUnormSrgb
+    )
+}
+
+/// RGBA8 macro-texture texels as the quad shader expects them: alpha 0 or 255 on either side of
+/// [`QUAD_ALPHA_CUTOFF`] (what the alpha test decides does not change) and transparent texels
+/// black, so that filtering weighs opaque texels only ([`PageParams`]).
+fn premultiply(rgba: &mut [u8]) {
+    for t in rgba.chunks_exact_mut(4) {
+        if f32::from(t[3]) / 255.0 >= QUAD_ALPHA_CUTOFF {
+            t[3] = 255;
+        } else {
+            t.copy_from_slice(&[0; 4]);
+        }
+    }
 }
 
 /// GPU resources of one baked cell: its near geometry, its macro-textures (packed into atlas
@@ -339,12 +385,15 @@ impl ImpostorCell {
                 .collect(),
             None => macros
                 .into_iter()
-                .map(|m| MacroUpload {
-                    width: m.width,
-                    height: m.height,
-                    row_texels: 1,
-                    row_bytes: 4 * m.width as u64,
-                    data: m.rgba,
+                .map(|mut m| {
+                    premultiply(&mut m.rgba);
+                    MacroUpload {
+                        width: m.width,
+                        height: m.height,
+                        row_texels: 1,
+                        row_bytes: 4 * m.width as u64,
+                        data: m.rgba,
+                    }
                 })
                 .collect(),
         };
@@ -380,8 +429,8 @@ impl ImpostorCell {
                 address_mode_u: wgpu::AddressMode::ClampToEdge,
                 address_mode_v: wgpu::AddressMode::ClampToEdge,
                 address_mode_w: wgpu::AddressMode::ClampToEdge,
-                mag_filter: wgpu::FilterMode::Nearest,
-                min_filter: wgpu::FilterMode::Nearest,
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
                 mipmap_filter: wgpu::MipmapFilterMode::Nearest,
                 ..Default::default()
             });
@@ -588,6 +637,10 @@ fn create_page(
     sampler: &wgpu::Sampler,
 ) -> (wgpu::Texture, wgpu::BindGroup) {
     let label = format!("lemi macro-texture atlas page {page}");
+    // Texels stored sRGB-encoded and passed through are filtered through an sRGB view: decoded
+    // to linear light before they are mixed.
+    let srgb = format.add_srgb_suffix();
+    let view_formats = [srgb];
     let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
         label: Some(&label),
         size: wgpu::Extent3d {
@@ -600,9 +653,28 @@ fn create_page(
         dimension: wgpu::TextureDimension::D2,
         format,
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
+        view_formats: if srgb == format { &[] } else { &view_formats },
     });
     let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    let linear = texture.create_view(&wgpu::TextureViewDescriptor {
+        format: Some(srgb),
+        ..Default::default()
+    });
+    let params = PageParams {
+        flags: [
+            f32::from(u8::from(transparent_black(format))),
+            0.0,
+            0.0,
+            0.0,
+        ],
+    };
+    let params = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(&label),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
     let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some(&label),
         layout,
@@ -614,6 +686,14 @@ fn create_page(
             wgpu::BindGroupEntry {
                 binding: 4,
                 resource: wgpu::BindingResource::Sampler(sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: wgpu::BindingResource::TextureView(&linear),
+            },
+            wgpu::BindGroupEntry {
+                binding: 6,
+                resource: params.as_entire_binding(),
             },
         ],
     });
@@ -654,7 +734,10 @@ mod tests {
             quad(1, [4, 4, 8, 8], [-1.0, 1.0, -1.0, 1.0, -7.0]),
         ];
         let near = [[0u32, 0u32]];
-        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        // The texels as stored: filtering weighs a BC7 page's transparent texels (which carry
+        // their block's mean colour) unlike a decoded page's (transparent black), see PageParams.
+        let mut r = ImpostorRenderer::new(&gpu).expect("renderer");
+        r.set_texel_filter(crate::TexelFilter::Nearest);
         let (view, opts) = (view(), RenderOptions::default());
         let rgba_cell = ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &rgba)
             .expect("RGBA8 upload");
