@@ -57,11 +57,14 @@ pub enum TexelFilter {
     /// nearest sampling skips texels, and the far field shimmers as the viewer moves.
     Nearest,
     /// The texel under the centre where a texel spans at least two pixels (magnified quads: bit
-    /// for bit [`TexelFilter::Nearest`]); elsewhere the mean of the opaque texels under an n×n
-    /// grid of points over the pixel's footprint (n = ⌈2 · texels per pixel⌉, at most 4: the
-    /// footprint sampled at twice the texel rate, averaged in linear light): a box filter of the
-    /// footprint, what a mip level would give without storing one, and exact at texel borders (no
-    /// texel of another micro-texture or of the transparent gap is ever fetched).
+    /// for bit [`TexelFilter::Nearest`]); elsewhere the mean, in linear light, of the opaque
+    /// texels under the pixel's footprint, from bilinear fetches that stay half a texel inside
+    /// the quad's rectangle (no texel of another micro-texture or of the transparent gap is ever
+    /// mixed in): one fetch where a texel spans one to two pixels (the hardware's tent filter),
+    /// one fetch at the nearest texel corner where it spans half a pixel to one (the mean of
+    /// those 2×2 texels), four such fetches at the centres of the footprint's quarters where
+    /// texels are smaller still (up to 4×4 texels: exact up to four texels a pixel, sampled
+    /// beyond). A box filter of the footprint, what a mip level would give, without storing one.
     #[default]
     Footprint,
 }
