@@ -207,7 +207,7 @@ fn cells_in_formats(
     macros: &[MacroTexture],
 ) -> Vec<(&'static str, ImpostorCell)> {
     use lemi_core::bundle::BlockMacro;
-    use lemi_core::compress::{encode_blocks, BlockFormat};
+    use lemi_core::compress::BlockFormat;
     let scene = empty_scene();
     let mut cells = vec![("RGBA8", quads_cell(gpu, quads, macros))];
     for (name, format) in [("BC1", BlockFormat::Bc1), ("BC7", BlockFormat::Bc7)] {
@@ -217,14 +217,7 @@ fn cells_in_formats(
         }
         let blocks = macros
             .iter()
-            .map(|m| BlockMacro {
-                format,
-                width: m.width,
-                height: m.height,
-                data: encode_blocks(format, m.width, m.height, &m.rgba)
-                    .expect("encode")
-                    .0,
-            })
+            .map(|m| BlockMacro::encode(format, m).expect("encode"))
             .collect();
         let data = ImpostorCellData::prepare(&scene, &[], quads, macros.to_vec())
             .expect("prepare")

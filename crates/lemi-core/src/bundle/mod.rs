@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::cell::{CellGrid, CellId, ViewCell};
 use crate::compress::{
-    decode_blocks, pack_stacked, read_basis_ktx2, read_ktx2, transcode_basis, BasisFormat,
-    BlockFormat, Ktx2Texture, MacroTexture, PackingOptions, TexelRect, TextureFormat,
+    decode_blocks, encode_blocks, pack_stacked, read_basis_ktx2, read_ktx2, transcode_basis,
+    BasisFormat, BlockFormat, CompressError, Ktx2Texture, MacroTexture, PackingOptions, TexelRect,
+    TextureFormat,
 };
 use crate::container::{self, Blob, ContainerError};
 use crate::object_cell::ObjectSetup;
@@ -1104,6 +1105,18 @@ pub struct BlockMacro {
     pub width: u32,
     pub height: u32,
     pub data: Vec<u8>,
+}
+
+impl BlockMacro {
+    /// `m` encoded to `format` ([`crate::compress::encode_blocks`]).
+    pub fn encode(format: BlockFormat, m: &MacroTexture) -> Result<BlockMacro, CompressError> {
+        Ok(BlockMacro {
+            format,
+            width: m.width,
+            height: m.height,
+            data: encode_blocks(format, m.width, m.height, &m.rgba)?.0,
+        })
+    }
 }
 
 /// Reads the header of a macro-texture's Basis Universal KTX2 blob and checks it against its

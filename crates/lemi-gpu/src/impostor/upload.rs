@@ -717,7 +717,7 @@ mod tests {
     #[test]
     fn block_compressed_macro_textures_upload_in_block_rows() {
         use lemi_core::bundle::BlockMacro;
-        use lemi_core::compress::{decode_blocks, encode_blocks};
+        use lemi_core::compress::decode_blocks;
         let Some(gpu) = gpu() else { return };
         if !gpu.has_block_format(BlockFormat::Bc7) {
             eprintln!("SKIPPED block_compressed_macro_textures_upload_in_block_rows: no BC on this adapter");
@@ -744,14 +744,7 @@ mod tests {
         for format in [BlockFormat::Bc7, BlockFormat::Bc1] {
             let blocks: Vec<BlockMacro> = rgba
                 .iter()
-                .map(|m| BlockMacro {
-                    format,
-                    width: m.width,
-                    height: m.height,
-                    data: encode_blocks(format, m.width, m.height, &m.rgba)
-                        .expect("encode")
-                        .0,
-                })
+                .map(|m| BlockMacro::encode(format, m).expect("encode"))
                 .collect();
             let decoded: Vec<MacroTexture> = blocks
                 .iter()
