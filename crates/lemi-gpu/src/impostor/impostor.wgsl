@@ -107,10 +107,10 @@ fn quad_color(in: QuadOut, centre: vec4<f32>, dx: vec2<f32>, dy: vec2<f32>) -> v
     if (!FOOTPRINT || !(s > 0.5)) {
         return centre.rgb;
     }
-    // The fetches run in a loop of as many turns as the pixel needs: a software rasterizer runs
-    // both sides of a branch for a group of pixels, but leaves a loop once no pixel of the group
-    // needs another turn, so magnified quads pay for no fetch and a group of pixels whose texels
-    // span at most two pixels pays for one.
+    // The fetches run in a loop of as many turns as the pixel needs, not in a branch: a software
+    // rasterizer runs both sides of a branch for a group of pixels, and a loop for as many turns
+    // as its neediest pixel takes (on llvmpipe at least one), so a group whose texels span at
+    // most two pixels pays for one fetch, not five.
     let taps = select(1, 4, s > 2.0);
     let size = vec2<f32>(textureDimensions(macro_linear));
     var sum = vec4<f32>(0.0);
