@@ -269,7 +269,7 @@ fn assert_round_trip(bundle: &Path, out: &Path) {
         let opaque = lemi_export::opaque_quads(&file).unwrap();
         let order = lemi_export::quad_order(&file.header.quads, &opaque);
         assert_eq!(back.quads.len(), file.header.quads.len(), "cell {id}");
-        let origin = lemi_export::cell_gltf::quad_origin(&file.header);
+        let origin = file.header.quad_origin();
         let mut worst = 0f64;
         for (read, &k) in back.quads.iter().zip(&order) {
             let q = &file.header.quads[k];

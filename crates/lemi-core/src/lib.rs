@@ -23,6 +23,7 @@ pub mod parallax_error;
 pub mod placement;
 pub mod scene;
 pub mod serde_inf;
+pub mod texel_scale;
 
 pub use face::Face;
 pub use scene::{Aabb, Material, Mesh, Scene, SceneBuilder, SceneStats, Texture, UpAxis, Vertex};

@@ -11,7 +11,7 @@
 //!   triangles `0 1 2, 0 2 3`. The vertices are the ones lemi's runtime draws
 //!   ([`Quad::drawn_vertices`]: the corners in the order of [`Quad::corners`] and the
 //!   macro-texel corners, both grown by `QUAD_GROWTH_TEXELS` so that neighbouring quads overlap
-//!   in any renderer). Positions are relative to the node's translation ([`quad_origin`]); with
+//!   in any renderer). Positions are relative to the node's translation ([`lemi_core::bundle::CellHeader::quad_origin`]); with
 //!   [`ExportGeometry::Meshopt`] they go through the `EXPONENTIAL` filter on a power-of-two grid
 //!   per quad, within [`POSITION_TOLERANCE_TEXELS`] of its layer's texels, else f32. Within a
 //!   primitive the quads are in the runtime's draw order:
@@ -61,16 +61,6 @@ use crate::{ExportError, ExportGeometry, ExportTextures};
 /// makes neighbouring quads overlap, so that they still overlap by 3/32 texel (and every vertex
 /// stays within 1/64 texel, about 1/64 output pixel at the resolution the layers are made for).
 pub const POSITION_TOLERANCE_TEXELS: f64 = lemi_core::bundle::QUAD_GROWTH_TEXELS / 4.0;
-
-/// The origin of a cell's exported quads (the `impostors` node's translation): the world
-/// reference viewpoint, from which a layer's texels are all the same size, so that the quads'
-/// offsets scale with their tolerance.
-pub fn quad_origin(header: &lemi_core::bundle::CellHeader) -> DVec3 {
-    match &header.object {
-        Some(o) => o.frame.to_world(header.cell.center),
-        None => header.cell.center,
-    }
-}
 
 /// The name of the extension for unlit materials.
 pub const UNLIT: &str = "KHR_materials_unlit";
@@ -261,7 +251,7 @@ pub fn export_cell(
     // quads: one primitive per macro-texture, in the runtime's order, relative to the node's
     // origin (the reference viewpoint, in f32 as the node's translation holds it)
     let quads = &header.quads;
-    let origin = quad_origin(header).as_vec3().as_dvec3();
+    let origin = header.quad_origin().as_vec3().as_dvec3();
     let opaque = opaque_quads(file)?;
     let order = quad_order(quads, &opaque);
     let mut primitives = Vec::new();

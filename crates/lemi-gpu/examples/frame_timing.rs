@@ -49,7 +49,8 @@ use lemi_core::bundle::Bundle;
 use lemi_core::camera::{Camera, View};
 use lemi_gpu::{
     BackendChoice, CullOptions, CulledGeometry, Frame, Gpu, GpuCulledScene, GpuGeometry, GpuScene,
-    ImpostorCell, ImpostorRenderer, RenderOptions, Renderer, TexelFilter, UploadOptions,
+    ImpostorCell, ImpostorCellData, ImpostorRenderer, RenderOptions, Renderer, TexelFilter,
+    UploadOptions,
 };
 
 type Error = Box<dyn std::error::Error>;
@@ -466,14 +467,19 @@ fn main() -> Result<(), Error> {
     for entry in manifest.cells.iter().take(cells) {
         let file = bundle.cell(entry.id)?;
         let macros = file.decode_macros()?;
-        let cell = ImpostorCell::upload(
-            &gpu,
-            Arc::clone(&materials),
+        // as the runtime lays a cell out: with its origin, so that draw calls whose texels
+        // span two pixels or more take nearest texels (the same pixels)
+        let data = ImpostorCellData::prepare_for(
             &scene,
             &file.near,
             &file.header.quads,
-            &macros,
+            macros.clone(),
+            gpu.limits().max_texture_dimension_2d,
+            Some(file.header.quad_origin()),
         )?;
+        let mut pending = ImpostorCell::begin_upload(&gpu, Arc::clone(&materials), data)?;
+        pending.upload_step(&gpu, u64::MAX)?;
+        let cell = pending.finish()?;
         let eye = file.header.cell.center;
         // The near geometry alone, as a scene for the reference renderer (same shading).
         let near_scene = if args.parts {
@@ -556,6 +562,10 @@ fn main() -> Result<(), Error> {
             }
             // Warm-up (pipelines, targets) and the frames to save or check.
             let f = impostors.render(&cell, &v, &options)?;
+            if args.stats {
+                let (draws, nearest) = impostors.last_quad_draws();
+                println!("  view {dname}: {draws} quad draw calls, {nearest} of them with nearest texels");
+            }
             if let Some(near) = &near_scene {
                 // far-field pixels: drawn in the impostor frame, not by the near geometry (quads
                 // lie beyond the near field, never in front of it)

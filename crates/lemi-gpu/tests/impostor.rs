@@ -231,6 +231,73 @@ fn cells_in_formats(
     cells
 }
 
+/// A frame chooses nearest texels for a draw call only where every texel of it spans two pixels
+/// or more, where the footprint filter takes the texel under each pixel's centre anyway: the
+/// frames with and without that choice are identical, and the choice is made where it can be.
+#[test]
+fn draws_of_magnified_quads_take_nearest_texels_with_the_same_pixels() {
+    let Some(gpu) = gpu() else { return };
+    let scene = empty_scene();
+    let mats = materials(&gpu, &scene);
+    let r = ImpostorRenderer::new(&gpu).expect("renderer");
+    assert_eq!(r.texel_filter(), TexelFilter::Footprint);
+    let opts = RenderOptions::default();
+    let view = camera().view();
+    // A checkerboard of n×n texels on [-1, 1]² at distance 2 (32 px across), seen from the
+    // origin: n/32 texels a pixel at the centre, about 1.5 times that at the corners (the
+    // bound: n/32 · 1.5). At n = 10 (0.31 .. 0.47) no pixel is filtered; at n = 24 (0.75 ..)
+    // every one is, and the checkerboard turns grey where the nearest texel would not.
+    for (n, nearest_expected) in [(10u32, true), (24, false)] {
+        let mut m = filled(n, n, [0, 0, 0, 255]);
+        for y in 0..n {
+            for x in 0..n {
+                if (x + y) % 2 == 0 {
+                    put(&mut m, x, y, [255, 255, 255, 255]);
+                }
+            }
+        }
+        let q = quad(0, 0, [0, 0, n, n], [-1.0, 1.0, -1.0, 1.0, -2.0], [0.0; 3]);
+        let cell = |origin: Option<DVec3>| {
+            let data = ImpostorCellData::prepare_for(
+                &scene,
+                &[],
+                std::slice::from_ref(&q),
+                vec![m.clone()],
+                8192,
+                origin,
+            )
+            .expect("prepare");
+            let mut pending = ImpostorCell::begin_upload(&gpu, mats.clone(), data).expect("begin");
+            pending.upload_step(&gpu, u64::MAX).expect("upload");
+            pending.finish().expect("finish")
+        };
+        let (bounded, unbounded) = (cell(Some(DVec3::ZERO)), cell(None));
+        let chosen = r.render(&bounded, &view, &opts).expect("render");
+        assert_eq!(
+            r.last_quad_draws(),
+            (1, u32::from(nearest_expected)),
+            "n = {n}"
+        );
+        let filtered = r.render(&unbounded, &view, &opts).expect("render");
+        assert_eq!(r.last_quad_draws(), (1, 0), "no origin, no bound: n = {n}");
+        assert_eq!(
+            chosen.rgba, filtered.rgba,
+            "n = {n}: the choice changed pixels"
+        );
+        assert_eq!(chosen.depth, filtered.depth, "n = {n}");
+        // the footprint filter does change this picture where texels are smaller than two
+        // pixels: the test would see a wrong choice
+        let mut nearest = ImpostorRenderer::new(&gpu).expect("renderer");
+        nearest.set_texel_filter(TexelFilter::Nearest);
+        let plain = nearest.render(&unbounded, &view, &opts).expect("render");
+        assert_eq!(
+            plain.rgba == filtered.rgba,
+            nearest_expected,
+            "n = {n}: nearest and filtered frames"
+        );
+    }
+}
+
 /// A 1-texel black and white checkerboard with a transparent square hole, shown minified (4
 /// texels per pixel) and magnified (¼ texel per pixel), in each texture format. Minified, nearest
 /// sampling shows every pixel black or white (the skipped texels are what makes a far field
@@ -393,7 +460,7 @@ fn quads_render_the_same_from_one_atlas_page_or_many() {
     let scene = empty_scene();
     let mats = materials(&gpu, &scene);
     let upload = |side: u32| {
-        let data = ImpostorCellData::prepare_for(&scene, &[], &quads, macros.clone(), side)
+        let data = ImpostorCellData::prepare_for(&scene, &[], &quads, macros.clone(), side, None)
             .expect("prepare");
         let mut pending = ImpostorCell::begin_upload(&gpu, mats.clone(), data).expect("begin");
         while !pending.upload_step(&gpu, 256).expect("upload step") {}

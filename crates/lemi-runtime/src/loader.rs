@@ -387,8 +387,16 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
         mut header, near, ..
     } = file;
     let quads = std::mem::take(&mut header.quads);
-    let data = ImpostorCellData::prepare_for(&ctx.scene, &near, &quads, macros, ctx.texture_side)
-        .map_err(|e| {
+    let origin = Some(header.quad_origin());
+    let data = ImpostorCellData::prepare_for(
+        &ctx.scene,
+        &near,
+        &quads,
+        macros,
+        ctx.texture_side,
+        origin,
+    )
+    .map_err(|e| {
         err(format!(
             "does not fit the scene it is drawn with: {e} (is it the scene the bundle was baked from?)"
         ))

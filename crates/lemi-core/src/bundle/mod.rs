@@ -394,6 +394,17 @@ pub struct CellHeader {
 }
 
 impl CellHeader {
+    /// The world point the quads' layers are placed around: the cell's reference viewpoint, or
+    /// for an object cell its world position. Seen from there, a layer's texels are all one
+    /// size (the glTF export places the quads relative to it; the runtime bounds their texel
+    /// scale from it, `crate::texel_scale`).
+    pub fn quad_origin(&self) -> DVec3 {
+        match &self.object {
+            Some(o) => o.frame.to_world(self.cell.center),
+            None => self.cell.center,
+        }
+    }
+
     /// The world corners of the quad covering texels `rect` of the layer of `face` at `distance`
     /// (in [`Quad::corners`] order): the face's layer square around the cell's reference
     /// viewpoint, or for an object cell the canonical square mapped by its frame. Every reader and

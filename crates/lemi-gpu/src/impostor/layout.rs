@@ -8,6 +8,7 @@ use lemi_core::bundle::BlockMacro;
 use lemi_core::bundle::Quad;
 use lemi_core::classify::TriRef;
 use lemi_core::compress::MacroTexture;
+use lemi_core::texel_scale::{self, TexelScale};
 use lemi_core::{Mesh, Scene};
 
 use super::atlas::{self, Atlas};
@@ -90,6 +91,7 @@ pub(super) fn quad_geometry(
     quads: &[Quad],
     macros: &[MacroTexture],
     max_side: u32,
+    origin: Option<glam::DVec3>,
 ) -> Result<QuadGeometry, GpuError> {
     if quads.len() > (u32::MAX / 6) as usize {
         return Err(GpuError::Limit(format!(
@@ -134,7 +136,21 @@ pub(super) fn quad_geometry(
     let sizes: Vec<(u32, u32)> = macros.iter().map(|m| (m.width, m.height)).collect();
     let atlas = atlas::pack(&sizes, max_side)?;
     let place = |q: &Quad| atlas.places.get(q.macro_index as usize).copied();
-    let order = draw_order(quads, &opaque, |q| place(q).map_or(0, |p| p.page));
+    // each quad's texel scale bound as drawn (grown), from the cell's origin when known
+    let scales: Vec<Option<TexelScale>> = quads
+        .iter()
+        .map(|q| {
+            let corners = q
+                .drawn_vertices()
+                .map(|(p, _)| glam::Vec3::from_array(p).as_dvec3());
+            let w = (q.texels[2].saturating_sub(q.texels[0])).max(1) as f64;
+            let h = (q.texels[3].saturating_sub(q.texels[1])).max(1) as f64;
+            let g = 2.0 * QUAD_GROWTH_TEXELS;
+            origin.and_then(|o| TexelScale::of_quad(o, corners, [w + g, h + g]))
+        })
+        .collect();
+    let band: Vec<u8> = scales.iter().map(spread_band).collect();
+    let order = draw_order(quads, &opaque, &band, |q| place(q).map_or(0, |p| p.page));
     let mut vertices = Vec::with_capacity(4 * quads.len());
     let mut indices = Vec::with_capacity(6 * quads.len());
     let mut draws: Vec<QuadDraw> = Vec::new();
@@ -150,7 +166,7 @@ pub(super) fn quad_geometry(
             continue; // checked above: every quad's macro-texture exists
         };
         let offset = [at.x, at.y];
-        let key = (q.face, opaque[k], at.page);
+        let key = (q.face, opaque[k], at.page, band[k]);
         if run != Some(key) {
             run = Some(key);
             draws.push(QuadDraw {
@@ -159,10 +175,18 @@ pub(super) fn quad_geometry(
                 index_count: 0,
                 opaque: opaque[k],
             });
-            bounds.push(Bounds::EMPTY);
+            bounds.push(Bounds {
+                texel_scale: scales[k],
+                origin: origin.unwrap_or_default(),
+                ..Bounds::EMPTY
+            });
         }
         let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
             continue;
+        };
+        b.texel_scale = match (b.texel_scale, scales[k]) {
+            (Some(a), Some(c)) => Some(a.merge(c)),
+            _ => None,
         };
         for (position, uv) in q.drawn_vertices() {
             b.add(glam::Vec3::from_array(position).as_dvec3());
@@ -186,18 +210,46 @@ pub(super) fn quad_geometry(
     })
 }
 
-/// An axis-aligned box around the quads of one draw call (their vertices as uploaded).
+/// What a frame needs to know of one draw call's quads: the axis-aligned box around them (their
+/// vertices as uploaded), for culling, and the bound of their texel scale, for the choice of
+/// pipeline.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Bounds {
     pub(super) min: glam::DVec3,
     pub(super) max: glam::DVec3,
+    /// Relative to the cell's [`Bounds::origin`]; `None` where no bound is known (no origin was
+    /// given, or a quad it does not apply to): the draw keeps the texel filter.
+    pub(super) texel_scale: Option<TexelScale>,
+    /// The point [`Bounds::texel_scale`] is relative to (the cell's
+    /// [`lemi_core::bundle::CellHeader::quad_origin`]).
+    pub(super) origin: glam::DVec3,
 }
+
+/// Where a quad's texels may take the nearest-texel pipeline: the footprint filter takes the texel
+/// under the pixel's centre wherever a texel spans at most half a texel a pixel step
+/// (`impostor.wgsl`, `quad_color`), so a draw whose bound stays under that writes the same pixels
+/// with either pipeline. The bound is exact math; the GPU's differences of f32 texture
+/// coordinates, and the helper pixels of a 2×2 quad just outside a quad's edge, differ from it
+/// by far less than the 1 % kept in hand.
+pub(super) const NEAREST_BELOW_TEXELS_PER_PIXEL: f64 = 0.5 / 1.01;
 
 impl Bounds {
     pub(super) const EMPTY: Bounds = Bounds {
         min: glam::DVec3::splat(f64::INFINITY),
         max: glam::DVec3::splat(f64::NEG_INFINITY),
+        texel_scale: None,
+        origin: glam::DVec3::ZERO,
     };
+
+    /// Whether every quad of the draw shows texels of at least two pixels in `view` (so that the
+    /// footprint filter would take the texel under each pixel's centre, as nearest sampling does).
+    pub(super) fn texels_magnified(&self, view: &lemi_core::camera::View) -> bool {
+        let (Some(s), Some(theta)) = (self.texel_scale, texel_scale::pixel_angle(view)) else {
+            return false;
+        };
+        s.texels_per_pixel(view.eye().distance(self.origin), theta)
+            <= NEAREST_BELOW_TEXELS_PER_PIXEL
+    }
 
     fn add(&mut self, p: glam::DVec3) {
         self.min = self.min.min(p);
@@ -237,27 +289,48 @@ fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
 
 /// The order quads are drawn in, as indices into `quads` (see the module docs): by face (so that
 /// a view culls the faces it does not see), the opaque quads before the alpha-tested ones, by
-/// atlas page (`page_of`), so that each (face, kind, page) run is one draw call; within a run the
-/// nearest layer first (a quad's `layer` counts far to near) so that depth rejection skips what
-/// nearer layers hide, then by macro-texture; ties keep the cell's order.
+/// atlas page (`page_of`), by spread band (`band`, [`spread_band`]), so that each (face, kind,
+/// page, band) run is one draw call; within a run the nearest layer first (a quad's `layer`
+/// counts far to near) so that depth rejection skips what nearer layers hide, then by
+/// macro-texture; ties keep the cell's order.
 ///
-/// Two quads of one layer are drawn in the same relative order as when every (layer, face, kind,
-/// macro-texture) run was its own draw call: face, then kind, then macro-texture (pages aside,
-/// which only a cell larger than one page has). Only such quads can meet at bit-equal depths
-/// (where their grown rims overlap), where the one drawn first shows; quads of different layers
-/// never do, so the order of layers between kinds changes no pixel.
-fn draw_order(quads: &[Quad], opaque: &[bool], page_of: impl Fn(&Quad) -> u32) -> Vec<usize> {
+/// Two quads of one layer and one band are drawn in the same relative order as when every
+/// (layer, face, kind, macro-texture) run was its own draw call: face, then kind, then
+/// macro-texture (pages aside, which only a cell larger than one page has). Only quads of one
+/// layer can meet at bit-equal depths (where their grown rims overlap), where the one drawn
+/// first shows; quads of different layers never do, so the order of layers between kinds and
+/// bands changes no pixel.
+fn draw_order(
+    quads: &[Quad],
+    opaque: &[bool],
+    band: &[u8],
+    page_of: impl Fn(&Quad) -> u32,
+) -> Vec<usize> {
     let mut order: Vec<usize> = (0..quads.len()).collect();
     order.sort_by_key(|&k| {
         (
             quads[k].face,
             !opaque[k],
             page_of(&quads[k]),
+            band[k],
             std::cmp::Reverse(quads[k].layer),
             quads[k].macro_index,
         )
     });
     order
+}
+
+/// The band of a quad's spread `g` (its farthest corner's distance from the origin over its
+/// plane's distance, 1 at a face's centre, √3 at its corners): `g²` in steps of √2, so that the
+/// quads of one band bound their texel scale within √2 of each other from the origin (the
+/// bound grows as `g²`). A face's quads are drawn in 4 bands, and a frame chooses nearest texels
+/// for each band it can: the inner ones first (their texels look largest), the corners last.
+/// Quads without a bound are a band of their own.
+fn spread_band(scale: &Option<TexelScale>) -> u8 {
+    match scale {
+        Some(s) => ((s.spread * s.spread).log2() * 2.0).floor().clamp(0.0, 3.0) as u8,
+        None => u8::MAX,
+    }
 }
 
 /// A cell's impostor data checked and laid out for the GPU, on the CPU only (no GPU work, `Send`):
@@ -286,17 +359,24 @@ impl ImpostorCellData {
         quads: &[Quad],
         macros: Vec<MacroTexture>,
     ) -> Result<ImpostorCellData, GpuError> {
-        Self::prepare_for(scene, near, quads, macros, DEFAULT_PAGE_SIDE)
+        Self::prepare_for(scene, near, quads, macros, DEFAULT_PAGE_SIDE, None)
     }
 
     /// [`ImpostorCellData::prepare`] with atlas pages of at most `max_side` texels per side (the
-    /// adapter's texture side; [`ImpostorCell::begin_upload`] checks the pages against it).
+    /// adapter's texture side; [`ImpostorCell::begin_upload`] checks the pages against it) and,
+    /// with `origin` (the cell file's [`lemi_core::bundle::CellHeader::quad_origin`]), each
+    /// face's draw calls split by how far from the face's centre their quads lie, with a bound
+    /// of their texel scale ([`lemi_core::texel_scale`]): a frame then draws with nearest texels
+    /// every draw call whose texels span two pixels or more, where the footprint filter would
+    /// take the texel under each pixel's centre anyway (the same pixels, without the filter's
+    /// cost). Without `origin` every draw call keeps the texel filter.
     pub fn prepare_for(
         scene: &Scene,
         near: &[[u32; 2]],
         quads: &[Quad],
         macros: Vec<MacroTexture>,
         max_side: u32,
+        origin: Option<glam::DVec3>,
     ) -> Result<ImpostorCellData, GpuError> {
         let near: Vec<TriRef> = near.iter().map(|&pair| TriRef::from(pair)).collect();
         let near_meshes = scene.extract(&near)?;
@@ -311,7 +391,7 @@ impl ImpostorCellData {
                 )));
             }
         }
-        let geometry = quad_geometry(quads, &macros, max_side)?;
+        let geometry = quad_geometry(quads, &macros, max_side, origin)?;
         Ok(ImpostorCellData {
             near_meshes,
             geometry,
@@ -473,7 +553,7 @@ mod tests {
             atlas,
             bounds,
             opaque_quads,
-        } = quad_geometry(&quads, &macros, 64).expect("valid quads");
+        } = quad_geometry(&quads, &macros, 64, None).expect("valid quads");
         assert_eq!(bounds.len(), draws.len());
         assert_eq!(opaque_quads, 4);
         assert_eq!(v.len(), 24);
@@ -530,13 +610,13 @@ mod tests {
             [0, 0, 8, 9],
             [u32::MAX, 0, 2, 2],
         ] {
-            let r = quad_geometry(&[quad(0, 0, rect)], &macros, 64);
+            let r = quad_geometry(&[quad(0, 0, rect)], &macros, 64, None);
             assert!(matches!(r, Err(GpuError::Invalid(_))), "{rect:?}");
         }
-        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 64).is_ok());
+        assert!(quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 64, None).is_ok());
         // a macro-texture larger than the pages may be
         assert!(matches!(
-            quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 4),
+            quad_geometry(&[quad(0, 0, [0, 0, 8, 8])], &macros, 4, None),
             Err(GpuError::Limit(_))
         ));
     }

@@ -34,13 +34,24 @@
 //!   offset in the page, added to the clamped texel as an integer, so the texel fetched is
 //!   exactly the one of the macro-texture on its own.
 //! - One vertex/index buffer holds all quads of a cell, in draw order: by cube face, the opaque
-//!   quads before the alpha-tested ones, by atlas page; within that the nearest layer first (a
-//!   quad's `layer` counts far to near), so that depth rejection skips the far texels nearer
-//!   layers hide, then by macro-texture; ties keep the cell's order. Each run of one face, kind
-//!   and page is one draw call: at most 12 per page whatever the layer and macro-texture counts
-//!   (8 for a cell of 4 faces), so the far field's cost is its pixels, not how the bake cut it
-//!   (GI 2002 sec. 1: the rendering speed of the far field decoupled from its complexity). The
-//!   near geometry is drawn before all quads.
+//!   quads before the alpha-tested ones, by atlas page, by spread band (below); within that the
+//!   nearest layer first (a quad's `layer` counts far to near), so that depth rejection skips
+//!   the far texels nearer layers hide, then by macro-texture; ties keep the cell's order. Each
+//!   run of one face, kind, page and band is one draw call: at most 48 per page whatever the
+//!   layer and macro-texture counts (at most 32, typically 18-24, for a cell of 4 faces), so the
+//!   far field's cost is its pixels, not how the bake cut it (GI 2002 sec. 1: the rendering
+//!   speed of the far field decoupled from its complexity). The near geometry is drawn before
+//!   all quads.
+//! - Texel filter per draw call: a cell laid out with its origin (the runtime's, `lemi render`'s:
+//!   [`ImpostorCellData::prepare_for`] with the cell file's `CellHeader::quad_origin`) splits each
+//!   face's quads into four bands of their distance from the face's centre (`g²` in steps of
+//!   √2, `g` the spread of [`lemi_core::texel_scale`]) and keeps per draw call a bound of how
+//!   many texels a pixel spans, whatever the eye. A frame evaluates it (constant time a draw
+//!   call) and draws with the nearest-texel pipeline every draw call whose texels all span two
+//!   pixels or more, where [`TexelFilter::Footprint`] takes the texel under the pixel's centre
+//!   anyway: the same pixels without the filter's cost, which a software rasterizer pays for
+//!   every pixel the filtering pipeline shades, needed or not. At the paper's settings (512²
+//!   layers, a 1280 px, 60° view) that is nearly every draw call from a cell's centre.
 //! - Draw order decides only between fragments of equal depth: where the grown rims
 //!   ([`QUAD_GROWTH_TEXELS`]) of two adjacent quads of one layer overlap and their interpolated
 //!   depths are bit-equal, the quad drawn first shows its edge texel. Quads of different layers
@@ -50,7 +61,10 @@
 //!   `examples/frame_timing --check`). Putting opaque quads first (earlier) changed that choice
 //!   for about 0.02 % of the pixels of a city frame compared with the macro-texture-then-layer
 //!   order before it: each such pixel shows the edge texel of the adjacent quad of the same layer
-//!   instead, one texel over. Everything else (the linear path, the opaque pipeline, culling)
+//!   instead, one texel over. The spread bands change it again where two adjacent quads of one
+//!   layer fall into different bands: 0-117 of 921,600 pixels of a `city:1M` frame at 1280×720
+//!   (`frame_timing --check`, nearest texels, so that only the order differs). Everything else
+//!   (the linear path, the opaque pipeline, culling, the texel filter's choice per draw call)
 //!   changes no pixel.
 //! - Culling: each draw call keeps the box around its quads; a frame skips the draw calls whose
 //!   box lies wholly outside the view frustum (with a margin), which cannot change the image. A

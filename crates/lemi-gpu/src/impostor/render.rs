@@ -3,6 +3,7 @@
 //! renders a cell with or without readback, timing each frame with timestamp queries.
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 use lemi_core::camera::View;
@@ -11,6 +12,8 @@ use lemi_core::enclosure::Window;
 use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF};
 use super::upload::{macro_format, macro_layout};
 use super::ImpostorCell;
+#[cfg(doc)]
+use super::ImpostorCellData;
 use crate::renderer::{Frame, GpuTime, RenderOptions};
 use crate::scene::{GpuChunk, GpuMaterials};
 use crate::shading::{ShadingGlobals, SHADING_WGSL};
@@ -89,6 +92,9 @@ pub struct ImpostorRenderer {
     max_dim: u32,
     targets: Mutex<Option<Targets>>,
     last_gpu: GpuTime,
+    /// The last frame's quad draw calls (high 32 bits) and how many of them took nearest texels
+    /// although the filter is [`TexelFilter::Footprint`] (low 32 bits).
+    last_draws: AtomicU64,
     texel_filter: TexelFilter,
 }
 
@@ -205,6 +211,7 @@ impl ImpostorRenderer {
                 max_dim: gpu.limits().max_texture_dimension_2d,
                 targets: Mutex::new(None),
                 last_gpu: GpuTime::default(),
+                last_draws: AtomicU64::new(0),
                 texel_filter: TexelFilter::default(),
             }
         })
@@ -252,6 +259,15 @@ impl ImpostorRenderer {
     /// [`crate::Renderer::last_gpu_ms`].
     pub fn last_gpu_ms(&self) -> Option<f64> {
         self.last_gpu.get()
+    }
+
+    /// The last frame's quad draw calls, and how many of them were drawn with nearest texels
+    /// because every texel of theirs spans two pixels or more in that view (the footprint filter
+    /// would have taken the texel under each pixel's centre: the same pixels; see
+    /// [`ImpostorCellData::prepare_for`]).
+    pub fn last_quad_draws(&self) -> (u32, u32) {
+        let v = self.last_draws.load(Ordering::Relaxed);
+        ((v >> 32) as u32, v as u32)
     }
 
     /// Like [`ImpostorRenderer::render`] but only the impostor quads, without the near geometry.
@@ -476,6 +492,7 @@ impl ImpostorRenderer {
             }
             scissor(&mut pass, window.as_ref());
             let mut pipeline = None;
+            let (mut quad_draws, mut nearest_draws) = (0u32, 0u32);
             for (cell, (vertices, indices)) in &quads {
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 pass.set_vertex_buffer(0, vertices.slice(..));
@@ -488,16 +505,22 @@ impl ImpostorRenderer {
                     if b.outside(&view_proj) {
                         continue;
                     }
-                    if pipeline != Some(d.opaque) {
-                        let pipelines = &self.quad_pipelines
-                            [usize::from(self.texel_filter == TexelFilter::Footprint)];
+                    // the footprint filter only where some texel may span less than two
+                    // pixels: elsewhere it takes the centre texel, as the nearest pipeline does
+                    let filter =
+                        self.texel_filter == TexelFilter::Footprint && !b.texels_magnified(view);
+                    nearest_draws +=
+                        u32::from(!filter && self.texel_filter == TexelFilter::Footprint);
+                    if pipeline != Some((filter, d.opaque)) {
+                        let pipelines = &self.quad_pipelines[usize::from(filter)];
                         pass.set_pipeline(if d.opaque {
                             &pipelines.opaque
                         } else {
                             &pipelines.alpha_tested
                         });
-                        pipeline = Some(d.opaque);
+                        pipeline = Some((filter, d.opaque));
                     }
+                    quad_draws += 1;
                     if bound != Some(d.page) {
                         pass.set_bind_group(1, g, &[]);
                         bound = Some(d.page);
@@ -506,6 +529,10 @@ impl ImpostorRenderer {
                 }
             }
             drop(pass);
+            self.last_draws.store(
+                (u64::from(quad_draws) << 32) | u64::from(nearest_draws),
+                Ordering::Relaxed,
+            );
             targets.finish_encoding(&mut encoder, readback);
             self.queue.submit([encoder.finish()]);
         })?;

@@ -140,7 +140,7 @@ impl ImpostorCell {
         macros: &[MacroTexture],
     ) -> Result<ImpostorCell, GpuError> {
         let side = gpu.limits().max_texture_dimension_2d;
-        let data = ImpostorCellData::prepare_for(scene, near, quads, macros.to_vec(), side)?;
+        let data = ImpostorCellData::prepare_for(scene, near, quads, macros.to_vec(), side, None)?;
         let mut pending = ImpostorCell::begin_upload(gpu, materials, data)?;
         pending.upload_step(gpu, u64::MAX)?;
         pending.finish()
@@ -159,8 +159,14 @@ impl ImpostorCell {
         let bad = |e: lemi_core::container::ContainerError| GpuError::Invalid(e.to_string());
         let macros = file.decode_macros().map_err(bad)?;
         let side = gpu.limits().max_texture_dimension_2d;
-        let data =
-            ImpostorCellData::prepare_for(scene, &file.near, &file.header.quads, macros, side)?;
+        let data = ImpostorCellData::prepare_for(
+            scene,
+            &file.near,
+            &file.header.quads,
+            macros,
+            side,
+            Some(file.header.quad_origin()),
+        )?;
         let data = match file.block_macros().map_err(bad)? {
             Some(b) if b.first().is_some_and(|m| gpu.has_block_format(m.format)) => {
                 data.with_blocks(b)?
