@@ -17,10 +17,12 @@
 //! ```text
 //! cargo run --release -p lemi-gpu --example frame_timing -- [BUNDLE] [--reps N] [--cells K]
 //!     [--size WxH] [--fov DEG] [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]
-//!     [--texel-filter footprint|nearest]
+//!     [--texel-filter footprint|nearest] [--eye-at X,Y,Z]
 //! ```
 //!
-//! `BUNDLE` defaults to `/tmp/bw` (the scene is rebuilt from the manifest's sources). `--cells K`
+//! `BUNDLE` defaults to `/tmp/bw` (the scene is rebuilt from the manifest's sources). The views
+//! look along the four horizontal axes from each cell's centre, or with `--eye-at X,Y,Z` from
+//! the point that many half extents of the cell off it (`1,1,1`: a corner). `--cells K`
 //! takes the first K cells, `--reps N` times every view N times. `--save DIR` writes every view's
 //! frames (raw RGBA8 + f32 depth) to `DIR`; `--check DIR` compares the frames with those saved
 //! earlier and prints how many pixels differ (to check that an optimisation changes no pixel).
@@ -72,6 +74,9 @@ struct Args {
     stats: bool,
     /// How the impostor quads take their colour from their texels.
     texel_filter: TexelFilter,
+    /// Where in its cell the eye is: a fraction of the cell's half extent per axis (0 0 0: the
+    /// centre, 1 1 1: a corner).
+    eye_at: DVec3,
 }
 
 fn parse_args() -> Result<Args, Error> {
@@ -88,6 +93,7 @@ fn parse_args() -> Result<Args, Error> {
         parts: false,
         stats: false,
         texel_filter: TexelFilter::default(),
+        eye_at: DVec3::ZERO,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -107,6 +113,15 @@ fn parse_args() -> Result<Args, Error> {
             "--no-geometry" => a.no_geometry = true,
             "--parts" => a.parts = true,
             "--stats" => a.stats = true,
+            "--eye-at" => {
+                let v: Vec<f64> = (value()?.split(','))
+                    .map(str::parse)
+                    .collect::<Result<_, _>>()?;
+                match v[..] {
+                    [x, y, z] if v.iter().all(|c| c.abs() <= 1.0) => a.eye_at = DVec3::new(x, y, z),
+                    _ => return Err("--eye-at wants x,y,z in [-1, 1]".into()),
+                }
+            }
             "--texel-filter" => {
                 a.texel_filter = match value()?.as_str() {
                     "nearest" => TexelFilter::Nearest,
@@ -118,7 +133,7 @@ fn parse_args() -> Result<Args, Error> {
                 println!(
                     "frame_timing [BUNDLE] [--reps N] [--cells K] [--size WxH] [--fov DEG] \
                      [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats] \
-                     [--texel-filter footprint|nearest]"
+                     [--texel-filter footprint|nearest] [--eye-at X,Y,Z]"
                 );
                 std::process::exit(0);
             }
@@ -480,7 +495,7 @@ fn main() -> Result<(), Error> {
         let mut pending = ImpostorCell::begin_upload(&gpu, Arc::clone(&materials), data)?;
         pending.upload_step(&gpu, u64::MAX)?;
         let cell = pending.finish()?;
-        let eye = file.header.cell.center;
+        let eye = file.header.cell.center + file.header.cell.half * args.eye_at;
         // The near geometry alone, as a scene for the reference renderer (same shading).
         let near_scene = if args.parts {
             let meshes = near_meshes(&scene, &file.near);

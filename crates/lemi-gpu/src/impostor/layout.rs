@@ -149,7 +149,12 @@ pub(super) fn quad_geometry(
             origin.and_then(|o| TexelScale::of_quad(o, corners, [w + g, h + g]))
         })
         .collect();
-    let band: Vec<u8> = scales.iter().map(spread_band).collect();
+    let nearest_plane = (scales.iter().flatten())
+        .map(|s| s.min_distance)
+        .fold(f64::INFINITY, f64::min);
+    let band: Vec<u8> = (scales.iter())
+        .map(|s| scale_band(s, nearest_plane))
+        .collect();
     let order = draw_order(quads, &opaque, &band, |q| place(q).map_or(0, |p| p.page));
     let mut vertices = Vec::with_capacity(4 * quads.len());
     let mut indices = Vec::with_capacity(6 * quads.len());
@@ -289,7 +294,7 @@ fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
 
 /// The order quads are drawn in, as indices into `quads` (see the module docs): by face (so that
 /// a view culls the faces it does not see), the opaque quads before the alpha-tested ones, by
-/// atlas page (`page_of`), by spread band (`band`, [`spread_band`]), so that each (face, kind,
+/// atlas page (`page_of`), by texel scale band (`band`, [`scale_band`]), so that each (face, kind,
 /// page, band) run is one draw call; within a run the nearest layer first (a quad's `layer`
 /// counts far to near) so that depth rejection skips what nearer layers hide, then by
 /// macro-texture; ties keep the cell's order.
@@ -320,15 +325,24 @@ fn draw_order(
     order
 }
 
-/// The band of a quad's spread `g` (its farthest corner's distance from the origin over its
-/// plane's distance, 1 at a face's centre, √3 at its corners): `g²` in steps of √2, so that the
-/// quads of one band bound their texel scale within √2 of each other from the origin (the
-/// bound grows as `g²`). A face's quads are drawn in 4 bands, and a frame chooses nearest texels
-/// for each band it can: the inner ones first (their texels look largest), the corners last.
+/// The band of a quad's texel scale bound: its spread `g` (its farthest corner's distance from
+/// the origin over its plane's distance, 1 at a face's centre, √3 at its corners) in four bands
+/// of `g²` in steps of √2 (the bound grows as `g²`), times its plane's distance `D` in three
+/// octaves of the cell's nearest plane's `D₁` (`D < 2·D₁`, `< 4·D₁`, farther: an eye `h` off
+/// the origin inflates the bound by about `(1 + h/D)³`, most for the nearest layers). Each band
+/// is drawn by draw calls of its own, and a frame chooses nearest texels for each draw call it
+/// can: from a cell's centre the inner bands, from off the centre the inner and farther ones.
 /// Quads without a bound are a band of their own.
-fn spread_band(scale: &Option<TexelScale>) -> u8 {
+fn scale_band(scale: &Option<TexelScale>, nearest_plane: f64) -> u8 {
     match scale {
-        Some(s) => ((s.spread * s.spread).log2() * 2.0).floor().clamp(0.0, 3.0) as u8,
+        Some(s) => {
+            let spread = ((s.spread * s.spread).log2() * 2.0).floor().clamp(0.0, 3.0) as u8;
+            let octave = (s.min_distance / nearest_plane)
+                .log2()
+                .floor()
+                .clamp(0.0, 2.0) as u8;
+            4 * octave + spread
+        }
         None => u8::MAX,
     }
 }

@@ -37,21 +37,22 @@
 //!   quads before the alpha-tested ones, by atlas page, by spread band (below); within that the
 //!   nearest layer first (a quad's `layer` counts far to near), so that depth rejection skips
 //!   the far texels nearer layers hide, then by macro-texture; ties keep the cell's order. Each
-//!   run of one face, kind, page and band is one draw call: at most 48 per page whatever the
-//!   layer and macro-texture counts (at most 32, typically 18-24, for a cell of 4 faces), so the
-//!   far field's cost is its pixels, not how the bake cut it (GI 2002 sec. 1: the rendering
-//!   speed of the far field decoupled from its complexity). The near geometry is drawn before
-//!   all quads.
+//!   run of one face, kind, page and band is one draw call: at most 12 bands × 2 kinds per face
+//!   and page whatever the layer and macro-texture counts (72 on a `city:1M` cell of 4 faces,
+//!   about 40 of them in view), so the far field's cost is its pixels, not how the bake cut it
+//!   (GI 2002 sec. 1: the rendering speed of the far field decoupled from its complexity). The
+//!   near geometry is drawn before all quads.
 //! - Texel filter per draw call: a cell laid out with its origin (the runtime's, `lemi render`'s:
 //!   [`ImpostorCellData::prepare_for`] with the cell file's `CellHeader::quad_origin`) splits each
-//!   face's quads into four bands of their distance from the face's centre (`g²` in steps of
-//!   √2, `g` the spread of [`lemi_core::texel_scale`]) and keeps per draw call a bound of how
-//!   many texels a pixel spans, whatever the eye. A frame evaluates it (constant time a draw
-//!   call) and draws with the nearest-texel pipeline every draw call whose texels all span two
-//!   pixels or more, where [`TexelFilter::Footprint`] takes the texel under the pixel's centre
-//!   anyway: the same pixels without the filter's cost, which a software rasterizer pays for
-//!   every pixel the filtering pipeline shades, needed or not. At the paper's settings (512²
-//!   layers, a 1280 px, 60° view) that is nearly every draw call from a cell's centre.
+//!   face's quads into bands of their distance from the face's centre and of their layer's
+//!   distance (`layout::scale_band`) and keeps per draw call a bound of how many texels a pixel
+//!   spans, whatever the eye ([`lemi_core::texel_scale`]). A frame evaluates it (constant time
+//!   a draw call) and draws with the nearest-texel pipeline every draw call whose texels all
+//!   span two pixels or more, where [`TexelFilter::Footprint`] takes the texel under the
+//!   pixel's centre anyway: the same pixels without the filter's cost, which a software
+//!   rasterizer pays for every pixel the filtering pipeline shades, needed or not. At the
+//!   paper's settings (512² layers, a 1280 px, 60° view) that is nearly every draw call in view
+//!   from a cell's centre and about half of them from near its corners.
 //! - Draw order decides only between fragments of equal depth: where the grown rims
 //!   ([`QUAD_GROWTH_TEXELS`]) of two adjacent quads of one layer overlap and their interpolated
 //!   depths are bit-equal, the quad drawn first shows its edge texel. Quads of different layers
