@@ -84,13 +84,76 @@ impl TexelScale {
     /// infinite where the eye is as far from the origin as the nearest plane (the bound does not
     /// hold there).
     pub fn texels_per_pixel(&self, h: f64, pixel_angle: f64) -> f64 {
+        pixel_angle * self.factor(h)
+    }
+
+    /// [`TexelScale::texels_per_pixel`] over the pixel angle: `(D/t)·(g + h/D)²/(1 − h/D)`,
+    /// growing with `h`.
+    pub fn factor(&self, h: f64) -> f64 {
         let r = h / self.min_distance;
         // NaN (a non-finite eye) fails both tests
         let applies = (0.0..1.0).contains(&r) && h >= 0.0;
         if !applies {
             return f64::INFINITY;
         }
-        pixel_angle * self.distance_per_texel * (self.spread + r).powi(2) / (1.0 - r)
+        self.distance_per_texel * (self.spread + r).powi(2) / (1.0 - r)
+    }
+}
+
+/// Steps of [`TexelScaleTable`] between the origin and its reach.
+const TABLE_STEPS: usize = 8;
+
+/// The bound of a group of quads tabulated over the eye's distance from the origin, up to
+/// `reach` (the farthest a viewpoint of the view cell is): the largest [`TexelScale::factor`] of
+/// the group's quads at `TABLE_STEPS + 1` distances. Each quad's factor grows with the
+/// distance, so the entry at the next tabulated distance at or beyond the eye's bounds every
+/// quad; tighter than the group's merged [`TexelScale`], which combines the largest spread and
+/// the smallest distance of different quads. Beyond `reach`, the merged bound.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelScaleTable {
+    reach: f64,
+    at: [f64; TABLE_STEPS + 1],
+    all: TexelScale,
+}
+
+impl TexelScaleTable {
+    /// The table of a group holding only `first`, over eyes up to `reach` from the origin.
+    pub fn new(reach: f64, first: TexelScale) -> TexelScaleTable {
+        let reach = if reach.is_finite() {
+            reach.max(0.0)
+        } else {
+            0.0
+        };
+        TexelScaleTable {
+            reach,
+            at: std::array::from_fn(|i| first.factor(reach * i as f64 / TABLE_STEPS as f64)),
+            all: first,
+        }
+    }
+
+    /// Adds a quad to the group.
+    pub fn add(&mut self, s: TexelScale) {
+        for (i, v) in self.at.iter_mut().enumerate() {
+            *v = v.max(s.factor(self.reach * i as f64 / TABLE_STEPS as f64));
+        }
+        self.all = self.all.merge(s);
+    }
+
+    /// At most how many texels one pixel step spans on any quad of the group, for an eye `h`
+    /// from the origin and pixels subtending at most `pixel_angle` radians.
+    /// Both the tabulated and the merged bound hold; this is the smaller.
+    pub fn texels_per_pixel(&self, h: f64, pixel_angle: f64) -> f64 {
+        let merged = self.all.texels_per_pixel(h, pixel_angle);
+        let step = if h == 0.0 {
+            0.0
+        } else {
+            (h / self.reach * TABLE_STEPS as f64).ceil()
+        };
+        if (0.0..=TABLE_STEPS as f64).contains(&step) {
+            merged.min(pixel_angle * self.at[step as usize])
+        } else {
+            merged
+        }
     }
 }
 
@@ -222,6 +285,38 @@ mod tests {
                     prop_assert!(moved <= bound * (1.0 + 1e-6), "{moved} texels > bound {bound}");
                 }
             }
+        }
+    }
+
+    proptest! {
+        /// The tabulated bound of a group is at least every member's own bound, for any eye
+        /// distance, within the reach and beyond it, and never above the merged bound.
+        #[test]
+        fn the_table_bounds_every_quad_of_its_group(
+            quads in prop::collection::vec((5.0f64..500.0, 64.0f64..2048.0, 0.0f64..0.9, 0.0f64..0.9), 1..12),
+            reach in 0.0f64..8.0,
+            h in 0.0f64..10.0,
+        ) {
+            let origin = DVec3::new(-7.0, 2.0, 40.0);
+            let scales: Vec<TexelScale> = quads
+                .iter()
+                .map(|&(d, res, x, y)| {
+                    let rect = [x * res, y * res, x * res + 8.0, y * res + 8.0];
+                    TexelScale::of_quad(origin, face_quad(origin, 0, d, res, rect), [8.0, 8.0]).expect("quad")
+                })
+                .collect();
+            let mut table = TexelScaleTable::new(reach, scales[0]);
+            let mut all = scales[0];
+            for s in &scales[1..] {
+                table.add(*s);
+                all = all.merge(*s);
+            }
+            let bound = table.texels_per_pixel(h, 1e-3);
+            for s in &scales {
+                let own = s.texels_per_pixel(h, 1e-3);
+                prop_assert!(own <= bound, "{own} > {bound}");
+            }
+            prop_assert!(bound <= all.texels_per_pixel(h, 1e-3));
         }
     }
 

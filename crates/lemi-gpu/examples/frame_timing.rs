@@ -490,7 +490,7 @@ fn main() -> Result<(), Error> {
             &file.header.quads,
             macros.clone(),
             gpu.limits().max_texture_dimension_2d,
-            Some(file.header.quad_origin()),
+            Some(lemi_gpu::SeenFrom::of(&file.header)),
         )?;
         let mut pending = ImpostorCell::begin_upload(&gpu, Arc::clone(&materials), data)?;
         pending.upload_step(&gpu, u64::MAX)?;

@@ -41,8 +41,8 @@ pub use cell_recorder::{CellRecorder, RecordError, RecordedFace, Recording};
 pub use culled::{CullOptions, CullStats, CulledGeometry, GpuCulledScene};
 pub use device::{no_adapter_message, BackendChoice, Gpu, GpuError};
 pub use impostor::{
-    Composite, ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, TexelFilter,
-    DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF,
+    Composite, ImpostorCell, ImpostorCellData, ImpostorRenderer, PendingImpostorCell, SeenFrom,
+    TexelFilter, DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF,
 };
 pub use recorder::{LayerFrame, LayerRecorder, MaterialRun, RecordOptions};
 pub use renderer::{

@@ -257,21 +257,25 @@ fn draws_of_magnified_quads_take_nearest_texels_with_the_same_pixels() {
             }
         }
         let q = quad(0, 0, [0, 0, n, n], [-1.0, 1.0, -1.0, 1.0, -2.0], [0.0; 3]);
-        let cell = |origin: Option<DVec3>| {
+        let cell = |seen_from: Option<lemi_gpu::SeenFrom>| {
             let data = ImpostorCellData::prepare_for(
                 &scene,
                 &[],
                 std::slice::from_ref(&q),
                 vec![m.clone()],
                 8192,
-                origin,
+                seen_from,
             )
             .expect("prepare");
             let mut pending = ImpostorCell::begin_upload(&gpu, mats.clone(), data).expect("begin");
             pending.upload_step(&gpu, u64::MAX).expect("upload");
             pending.finish().expect("finish")
         };
-        let (bounded, unbounded) = (cell(Some(DVec3::ZERO)), cell(None));
+        let seen_from = lemi_gpu::SeenFrom {
+            origin: DVec3::ZERO,
+            reach: 0.0,
+        };
+        let (bounded, unbounded) = (cell(Some(seen_from)), cell(None));
         let chosen = r.render(&bounded, &view, &opts).expect("render");
         assert_eq!(
             r.last_quad_draws(),

@@ -387,14 +387,14 @@ fn load(ctx: &Context, id: CellId, t0: Instant) -> Result<DecodedCell, RuntimeEr
         mut header, near, ..
     } = file;
     let quads = std::mem::take(&mut header.quads);
-    let origin = Some(header.quad_origin());
+    let seen_from = Some(lemi_gpu::SeenFrom::of(&header));
     let data = ImpostorCellData::prepare_for(
         &ctx.scene,
         &near,
         &quads,
         macros,
         ctx.texture_side,
-        origin,
+        seen_from,
     )
     .map_err(|e| {
         err(format!(

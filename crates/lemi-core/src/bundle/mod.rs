@@ -405,6 +405,25 @@ impl CellHeader {
         }
     }
 
+    /// The farthest a viewpoint of the cell lies from [`CellHeader::quad_origin`]: the distance
+    /// of the cell box's farthest corner (for an object cell, mapped to the world by its frame,
+    /// an affine map, so a corner is still the farthest point).
+    pub fn quad_reach(&self) -> f64 {
+        let origin = self.quad_origin();
+        let (c, h) = (self.cell.center, self.cell.half);
+        (0..8)
+            .map(|k| {
+                let sign = |bit: u32| if k & (1 << bit) == 0 { -1.0 } else { 1.0 };
+                let corner = c + DVec3::new(sign(0) * h.x, sign(1) * h.y, sign(2) * h.z);
+                let world = match &self.object {
+                    Some(o) => o.frame.to_world(corner),
+                    None => corner,
+                };
+                world.distance(origin)
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// The world corners of the quad covering texels `rect` of the layer of `face` at `distance`
     /// (in [`Quad::corners`] order): the face's layer square around the cell's reference
     /// viewpoint, or for an object cell the canonical square mapped by its frame. Every reader and

@@ -5,10 +5,10 @@
 
 use bytemuck::{Pod, Zeroable};
 use lemi_core::bundle::BlockMacro;
-use lemi_core::bundle::Quad;
+use lemi_core::bundle::{CellHeader, Quad};
 use lemi_core::classify::TriRef;
 use lemi_core::compress::MacroTexture;
-use lemi_core::texel_scale::{self, TexelScale};
+use lemi_core::texel_scale::{self, TexelScale, TexelScaleTable};
 use lemi_core::{Mesh, Scene};
 
 use super::atlas::{self, Atlas};
@@ -84,6 +84,24 @@ pub(super) struct QuadGeometry {
     pub(super) opaque_quads: usize,
 }
 
+/// Where a cell's quads are seen from, for the texel scale bounds of its draw calls: the cell
+/// file's [`CellHeader::quad_origin`] and [`CellHeader::quad_reach`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeenFrom {
+    pub origin: glam::DVec3,
+    /// The farthest a viewpoint of the cell lies from `origin`.
+    pub reach: f64,
+}
+
+impl SeenFrom {
+    pub fn of(header: &CellHeader) -> SeenFrom {
+        SeenFrom {
+            origin: header.quad_origin(),
+            reach: header.quad_reach(),
+        }
+    }
+}
+
 /// Checks the quads against `macros`, packs the macro-textures into atlas pages of at most
 /// `max_side` texels per side and builds their [`QuadGeometry`] (see the module docs for the
 /// order).
@@ -91,7 +109,7 @@ pub(super) fn quad_geometry(
     quads: &[Quad],
     macros: &[MacroTexture],
     max_side: u32,
-    origin: Option<glam::DVec3>,
+    seen_from: Option<SeenFrom>,
 ) -> Result<QuadGeometry, GpuError> {
     if quads.len() > (u32::MAX / 6) as usize {
         return Err(GpuError::Limit(format!(
@@ -146,14 +164,15 @@ pub(super) fn quad_geometry(
             let w = (q.texels[2].saturating_sub(q.texels[0])).max(1) as f64;
             let h = (q.texels[3].saturating_sub(q.texels[1])).max(1) as f64;
             let g = 2.0 * QUAD_GROWTH_TEXELS;
-            origin.and_then(|o| TexelScale::of_quad(o, corners, [w + g, h + g]))
+            seen_from.and_then(|v| TexelScale::of_quad(v.origin, corners, [w + g, h + g]))
         })
         .collect();
-    let nearest_plane = (scales.iter().flatten())
-        .map(|s| s.min_distance)
+    let reach = seen_from.map_or(0.0, |v| v.reach);
+    let largest_texels = (scales.iter().flatten())
+        .map(|s| s.factor(0.0))
         .fold(f64::INFINITY, f64::min);
     let band: Vec<u8> = (scales.iter())
-        .map(|s| scale_band(s, nearest_plane))
+        .map(|s| scale_band(s, reach, largest_texels))
         .collect();
     let order = draw_order(quads, &opaque, &band, |q| place(q).map_or(0, |p| p.page));
     let mut vertices = Vec::with_capacity(4 * quads.len());
@@ -181,18 +200,21 @@ pub(super) fn quad_geometry(
                 opaque: opaque[k],
             });
             bounds.push(Bounds {
-                texel_scale: scales[k],
-                origin: origin.unwrap_or_default(),
+                texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
+                origin: seen_from.map_or(glam::DVec3::ZERO, |v| v.origin),
                 ..Bounds::EMPTY
             });
+        } else if let (Some(b), Some(s)) = (bounds.last_mut(), scales[k]) {
+            if let Some(t) = &mut b.texel_scale {
+                t.add(s);
+            }
         }
         let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
             continue;
         };
-        b.texel_scale = match (b.texel_scale, scales[k]) {
-            (Some(a), Some(c)) => Some(a.merge(c)),
-            _ => None,
-        };
+        if scales[k].is_none() {
+            b.texel_scale = None;
+        }
         for (position, uv) in q.drawn_vertices() {
             b.add(glam::Vec3::from_array(position).as_dvec3());
             vertices.push(QuadVertex {
@@ -224,7 +246,7 @@ pub(super) struct Bounds {
     pub(super) max: glam::DVec3,
     /// Relative to the cell's [`Bounds::origin`]; `None` where no bound is known (no origin was
     /// given, or a quad it does not apply to): the draw keeps the texel filter.
-    pub(super) texel_scale: Option<TexelScale>,
+    pub(super) texel_scale: Option<TexelScaleTable>,
     /// The point [`Bounds::texel_scale`] is relative to (the cell's
     /// [`lemi_core::bundle::CellHeader::quad_origin`]).
     pub(super) origin: glam::DVec3,
@@ -325,24 +347,18 @@ fn draw_order(
     order
 }
 
-/// The band of a quad's texel scale bound: its spread `g` (its farthest corner's distance from
-/// the origin over its plane's distance, 1 at a face's centre, √3 at its corners) in four bands
-/// of `g²` in steps of √2 (the bound grows as `g²`), times its plane's distance `D` in three
-/// octaves of the cell's nearest plane's `D₁` (`D < 2·D₁`, `< 4·D₁`, farther: an eye `h` off
-/// the origin inflates the bound by about `(1 + h/D)³`, most for the nearest layers). Each band
-/// is drawn by draw calls of its own, and a frame chooses nearest texels for each draw call it
-/// can: from a cell's centre the inner bands, from off the centre the inner and farther ones.
-/// Quads without a bound are a band of their own.
-fn scale_band(scale: &Option<TexelScale>, nearest_plane: f64) -> u8 {
+/// The band of a quad: 0 where its texels, seen from anywhere within `reach` of the origin,
+/// subtend at least half the angle of the cell's largest texels seen from the origin
+/// (`largest`, the smallest [`TexelScale::factor`] at the origin: a cube face's central
+/// texels), 1 elsewhere; quads without a bound are a band of their own. A view in which the
+/// largest texels span four pixels or more (the paper's 512² layers for a 1280 px, 60° view:
+/// 4.3) draws band 0 with nearest texels from anywhere in the cell; band 1 (the rims of the
+/// faces, and of the nearest layers more of them) whenever its own bound allows. Two bands keep
+/// a cell of 4 faces at 16 draw calls (opaque and alpha-tested).
+fn scale_band(scale: &Option<TexelScale>, reach: f64, largest: f64) -> u8 {
     match scale {
-        Some(s) => {
-            let spread = ((s.spread * s.spread).log2() * 2.0).floor().clamp(0.0, 3.0) as u8;
-            let octave = (s.min_distance / nearest_plane)
-                .log2()
-                .floor()
-                .clamp(0.0, 2.0) as u8;
-            4 * octave + spread
-        }
+        Some(s) if s.factor(reach) <= 2.0 * largest => 0,
+        Some(_) => 1,
         None => u8::MAX,
     }
 }
@@ -378,19 +394,19 @@ impl ImpostorCellData {
 
     /// [`ImpostorCellData::prepare`] with atlas pages of at most `max_side` texels per side (the
     /// adapter's texture side; [`ImpostorCell::begin_upload`] checks the pages against it) and,
-    /// with `origin` (the cell file's [`lemi_core::bundle::CellHeader::quad_origin`]), each
-    /// face's draw calls split by how far from the face's centre their quads lie, with a bound
-    /// of their texel scale ([`lemi_core::texel_scale`]): a frame then draws with nearest texels
-    /// every draw call whose texels span two pixels or more, where the footprint filter would
-    /// take the texel under each pixel's centre anyway (the same pixels, without the filter's
-    /// cost). Without `origin` every draw call keeps the texel filter.
+    /// with `seen_from` (from the cell file's header, [`SeenFrom::of`]), each face's draw calls
+    /// split in two bands of their texel scale, with a bound of it for any eye
+    /// ([`lemi_core::texel_scale`]): a frame then draws with nearest texels every draw call whose
+    /// texels span two pixels or more, where the footprint filter would take the texel under
+    /// each pixel's centre anyway (the same pixels, without the filter's cost). Without
+    /// `seen_from` every draw call keeps the texel filter.
     pub fn prepare_for(
         scene: &Scene,
         near: &[[u32; 2]],
         quads: &[Quad],
         macros: Vec<MacroTexture>,
         max_side: u32,
-        origin: Option<glam::DVec3>,
+        seen_from: Option<SeenFrom>,
     ) -> Result<ImpostorCellData, GpuError> {
         let near: Vec<TriRef> = near.iter().map(|&pair| TriRef::from(pair)).collect();
         let near_meshes = scene.extract(&near)?;
@@ -405,7 +421,7 @@ impl ImpostorCellData {
                 )));
             }
         }
-        let geometry = quad_geometry(quads, &macros, max_side, origin)?;
+        let geometry = quad_geometry(quads, &macros, max_side, seen_from)?;
         Ok(ImpostorCellData {
             near_meshes,
             geometry,

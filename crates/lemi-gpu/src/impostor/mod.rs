@@ -37,22 +37,23 @@
 //!   quads before the alpha-tested ones, by atlas page, by spread band (below); within that the
 //!   nearest layer first (a quad's `layer` counts far to near), so that depth rejection skips
 //!   the far texels nearer layers hide, then by macro-texture; ties keep the cell's order. Each
-//!   run of one face, kind, page and band is one draw call: at most 12 bands × 2 kinds per face
-//!   and page whatever the layer and macro-texture counts (72 on a `city:1M` cell of 4 faces,
-//!   about 40 of them in view), so the far field's cost is its pixels, not how the bake cut it
+//!   run of one face, kind, page and band is one draw call: at most 2 bands × 2 kinds per face
+//!   and page whatever the layer and macro-texture counts (16 for a cell of 4 faces, 12 of them
+//!   in view along an axis), so the far field's cost is its pixels, not how the bake cut it
 //!   (GI 2002 sec. 1: the rendering speed of the far field decoupled from its complexity). The
 //!   near geometry is drawn before all quads.
-//! - Texel filter per draw call: a cell laid out with its origin (the runtime's, `lemi render`'s:
-//!   [`ImpostorCellData::prepare_for`] with the cell file's `CellHeader::quad_origin`) splits each
-//!   face's quads into bands of their distance from the face's centre and of their layer's
-//!   distance (`layout::scale_band`) and keeps per draw call a bound of how many texels a pixel
-//!   spans, whatever the eye ([`lemi_core::texel_scale`]). A frame evaluates it (constant time
-//!   a draw call) and draws with the nearest-texel pipeline every draw call whose texels all
-//!   span two pixels or more, where [`TexelFilter::Footprint`] takes the texel under the
-//!   pixel's centre anyway: the same pixels without the filter's cost, which a software
-//!   rasterizer pays for every pixel the filtering pipeline shades, needed or not. At the
-//!   paper's settings (512² layers, a 1280 px, 60° view) that is nearly every draw call in view
-//!   from a cell's centre and about half of them from near its corners.
+//! - Texel filter per draw call: a cell laid out with where it is seen from (the runtime's,
+//!   `lemi render`'s: [`ImpostorCellData::prepare_for`] with [`SeenFrom::of`] its header) splits
+//!   each face's quads into two bands (`layout::scale_band`: the quads whose texels subtend at
+//!   least half the angle of the cell's largest ones from anywhere in the cell, and the rest)
+//!   and keeps per draw call a bound of how many texels a pixel spans for any eye, tabulated
+//!   over the eye's distance from the cell's origin ([`lemi_core::texel_scale`]). A frame
+//!   evaluates it (constant time a draw call) and draws with the nearest-texel pipeline every
+//!   draw call whose texels all span two pixels or more, where [`TexelFilter::Footprint`] takes
+//!   the texel under the pixel's centre anyway: the same pixels without the filter's cost,
+//!   which a software rasterizer pays for every pixel the filtering pipeline shades, needed or
+//!   not. At the paper's settings (512² layers, a 1280 px, 60° view) that is 10-12 of the 12
+//!   draw calls in view from a cell's centre and 6 from near its corners (the inner band).
 //! - Draw order decides only between fragments of equal depth: where the grown rims
 //!   ([`QUAD_GROWTH_TEXELS`]) of two adjacent quads of one layer overlap and their interpolated
 //!   depths are bit-equal, the quad drawn first shows its edge texel. Quads of different layers
@@ -62,9 +63,10 @@
 //!   `examples/frame_timing --check`). Putting opaque quads first (earlier) changed that choice
 //!   for about 0.02 % of the pixels of a city frame compared with the macro-texture-then-layer
 //!   order before it: each such pixel shows the edge texel of the adjacent quad of the same layer
-//!   instead, one texel over. The spread bands change it again where two adjacent quads of one
-//!   layer fall into different bands: 0-117 of 921,600 pixels of a `city:1M` frame at 1280×720
-//!   (`frame_timing --check`, nearest texels, so that only the order differs). Everything else
+//!   instead, one texel over. The texel scale bands change it again where two adjacent quads
+//!   of one layer fall into different bands: 117 of 921,600 pixels in 1 of 16 `city:1M` frames
+//!   at 1280×720, none in the others (`frame_timing --check`, nearest texels, so that only the
+//!   order differs; the same with the filter). Everything else
 //!   (the linear path, the opaque pipeline, culling, the texel filter's choice per draw call)
 //!   changes no pixel.
 //! - Culling: each draw call keeps the box around its quads; a frame skips the draw calls whose
@@ -93,6 +95,8 @@ mod render;
 mod test_support;
 mod upload;
 
-pub use layout::{ImpostorCellData, DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF, QUAD_GROWTH_TEXELS};
+pub use layout::{
+    ImpostorCellData, SeenFrom, DEFAULT_PAGE_SIDE, QUAD_ALPHA_CUTOFF, QUAD_GROWTH_TEXELS,
+};
 pub use render::{Composite, ImpostorRenderer, TexelFilter};
 pub use upload::{ImpostorCell, PendingImpostorCell};

@@ -165,7 +165,7 @@ impl ImpostorCell {
             &file.header.quads,
             macros,
             side,
-            Some(file.header.quad_origin()),
+            Some(super::SeenFrom::of(&file.header)),
         )?;
         let data = match file.block_macros().map_err(bad)? {
             Some(b) if b.first().is_some_and(|m| gpu.has_block_format(m.format)) => {
