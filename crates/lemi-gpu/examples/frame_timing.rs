@@ -17,12 +17,14 @@
 //! ```text
 //! cargo run --release -p lemi-gpu --example frame_timing -- [BUNDLE] [--reps N] [--cells K]
 //!     [--size WxH] [--fov DEG] [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats]
-//!     [--texel-filter footprint|nearest] [--eye-at X,Y,Z]
+//!     [--texel-filter footprint|nearest] [--eye-at X,Y,Z] [--rgba8]
 //! ```
 //!
 //! `BUNDLE` defaults to `/tmp/bw` (the scene is rebuilt from the manifest's sources). The views
 //! look along the four horizontal axes from each cell's centre, or with `--eye-at X,Y,Z` from
-//! the point that many half extents of the cell off it (`1,1,1`: a corner). `--cells K`
+//! the point that many half extents of the cell off it (`1,1,1`: a corner). Macro-textures stored
+//! block-compressed are uploaded as stored where the adapter samples the format, as the runtime
+//! does (before, this example always decoded them to RGBA8; `--rgba8` still does). `--cells K`
 //! takes the first K cells, `--reps N` times every view N times. `--save DIR` writes every view's
 //! frames (raw RGBA8 + f32 depth) to `DIR`; `--check DIR` compares the frames with those saved
 //! earlier and prints how many pixels differ (to check that an optimisation changes no pixel).
@@ -77,6 +79,8 @@ struct Args {
     /// Where in its cell the eye is: a fraction of the cell's half extent per axis (0 0 0: the
     /// centre, 1 1 1: a corner).
     eye_at: DVec3,
+    /// Upload block-compressed macro-textures decoded to RGBA8 instead of as stored.
+    rgba8: bool,
 }
 
 fn parse_args() -> Result<Args, Error> {
@@ -94,6 +98,7 @@ fn parse_args() -> Result<Args, Error> {
         stats: false,
         texel_filter: TexelFilter::default(),
         eye_at: DVec3::ZERO,
+        rgba8: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -113,6 +118,7 @@ fn parse_args() -> Result<Args, Error> {
             "--no-geometry" => a.no_geometry = true,
             "--parts" => a.parts = true,
             "--stats" => a.stats = true,
+            "--rgba8" => a.rgba8 = true,
             "--eye-at" => {
                 let v: Vec<f64> = (value()?.split(','))
                     .map(str::parse)
@@ -133,7 +139,7 @@ fn parse_args() -> Result<Args, Error> {
                 println!(
                     "frame_timing [BUNDLE] [--reps N] [--cells K] [--size WxH] [--fov DEG] \
                      [--save DIR | --check DIR] [--no-geometry] [--parts] [--stats] \
-                     [--texel-filter footprint|nearest] [--eye-at X,Y,Z]"
+                     [--texel-filter footprint|nearest] [--eye-at X,Y,Z] [--rgba8]"
                 );
                 std::process::exit(0);
             }
@@ -492,9 +498,20 @@ fn main() -> Result<(), Error> {
             gpu.limits().max_texture_dimension_2d,
             Some(lemi_gpu::SeenFrom::of(&file.header)),
         )?;
+        // block-compressed macro-textures go to the GPU as stored where the adapter samples
+        // them, as the runtime uploads them (`--rgba8`: decoded)
+        let data = match file.block_macros()? {
+            Some(b) if !args.rgba8 && b.first().is_some_and(|m| gpu.has_block_format(m.format)) => {
+                data.with_blocks(b)?
+            }
+            _ => data,
+        };
         let mut pending = ImpostorCell::begin_upload(&gpu, Arc::clone(&materials), data)?;
         pending.upload_step(&gpu, u64::MAX)?;
         let cell = pending.finish()?;
+        if entry.id == manifest.cells[0].id {
+            println!("macro-textures uploaded as {:?}", cell.texture_format());
+        }
         let eye = file.header.cell.center + file.header.cell.half * args.eye_at;
         // The near geometry alone, as a scene for the reference renderer (same shading).
         let near_scene = if args.parts {
