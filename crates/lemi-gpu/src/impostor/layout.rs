@@ -94,6 +94,7 @@ pub struct SeenFrom {
 }
 
 impl SeenFrom {
+    /// Where a cell file's quads are seen from.
     pub fn of(header: &CellHeader) -> SeenFrom {
         SeenFrom {
             origin: header.quad_origin(),
@@ -253,7 +254,7 @@ pub(super) struct Bounds {
 }
 
 /// Where a quad's texels may take the nearest-texel pipeline: the footprint filter takes the texel
-/// under the pixel's centre wherever a texel spans at most half a texel a pixel step
+/// under the pixel's centre wherever a pixel step spans at most half a texel
 /// (`impostor.wgsl`, `quad_color`), so a draw whose bound stays under that writes the same pixels
 /// with either pipeline. The bound is exact math; the GPU's differences of f32 texture
 /// coordinates, and the helper pixels of a 2×2 quad just outside a quad's edge, differ from it
@@ -612,6 +613,60 @@ mod tests {
         assert_eq!(v[8].rect, [4.0, 0.0, 6.0, 1.0]);
         assert_eq!(v[20].rect, [6.0, 0.0, 7.0, 1.0]);
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
+    }
+
+    /// A quad of the `−Z` face layer at distance 100 around the origin, texels `rect` (x0, y0,
+    /// x1, y1) of a 64² face image.
+    fn face_quad(macro_index: u32, rect: [u16; 4]) -> Quad {
+        let at = |x: u16, y: u16| {
+            let s = |v: u16| (-1.0 + 2.0 * v as f32 / 64.0) * 100.0;
+            [-s(x), -s(y), -100.0]
+        };
+        Quad {
+            face: Face::NegZ,
+            layer: 0,
+            texels: rect,
+            corners: [
+                at(rect[0], rect[1]),
+                at(rect[2], rect[1]),
+                at(rect[2], rect[3]),
+                at(rect[0], rect[3]),
+            ],
+            macro_index,
+            rect: [0, 0, (rect[2] - rect[0]) as u32, (rect[3] - rect[1]) as u32],
+            rotated: false,
+        }
+    }
+
+    #[test]
+    fn quads_near_a_face_centre_and_at_its_corner_are_drawn_in_two_bands() {
+        let macros = [opaque_macro(4, 4), opaque_macro(4, 4)];
+        // the corner quad first in the cell's order: the bands put the central one first
+        let quads = [face_quad(0, [0, 0, 4, 4]), face_quad(1, [30, 30, 34, 34])];
+        let seen = SeenFrom {
+            origin: glam::DVec3::ZERO,
+            reach: 5.0,
+        };
+        let banded = quad_geometry(&quads, &macros, 64, Some(seen)).expect("quads");
+        assert_eq!(banded.draws.len(), 2);
+        assert_eq!(banded.vertices[0].rect, [0.0, 0.0, 4.0, 4.0]);
+        let [centre, corner] = [0, 1].map(|k| banded.bounds[k].texel_scale.expect("bound"));
+        // the corner's texels look about three times smaller (g² = 3) from the origin
+        let ratio = corner.texels_per_pixel(0.0, 1.0) / centre.texels_per_pixel(0.0, 1.0);
+        assert!((2.5..3.1).contains(&ratio), "{ratio}");
+        // the central quad's macro-texture (1) is drawn first
+        assert_eq!(
+            banded.vertices[0].offset,
+            [banded.atlas.places[1].x, banded.atlas.places[1].y]
+        );
+        // without knowing where the cell is seen from: one draw call, no bound, the cell's order
+        let plain = quad_geometry(&quads, &macros, 64, None).expect("quads");
+        assert_eq!(plain.draws.len(), 1);
+        assert_eq!(plain.bounds[0].texel_scale, None);
+        assert_eq!(
+            plain.vertices[0].offset,
+            [plain.atlas.places[0].x, plain.atlas.places[0].y]
+        );
     }
 
     #[test]
