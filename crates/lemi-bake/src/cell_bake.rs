@@ -258,12 +258,10 @@ impl<'a> Baker<'a> {
                             .map_err(|e| CompressError::Invalid(e.to_string()))?;
                     Ok((ktx2, stats.bytes))
                 };
-                // the Basis encoder runs its own threads: one macro-texture at a time
-                let macros = &compressed.macro_textures;
-                let encoded: Result<Vec<(Vec<u8>, u64)>, CompressError> = match format.basis() {
-                    Some(_) => macros.iter().map(encode).collect(),
-                    None => macros.par_iter().map(encode).collect(),
-                };
+                // one macro-texture per thread (the Basis encoder runs single-threaded, see
+                // `encode_basis`)
+                let encoded: Result<Vec<(Vec<u8>, u64)>, CompressError> =
+                    compressed.macro_textures.par_iter().map(encode).collect();
                 let encoded = encoded.map_err(|source| BakeError::Compress {
                     cell: cell.id(),
                     source,

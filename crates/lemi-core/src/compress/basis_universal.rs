@@ -198,8 +198,13 @@ fn run_encoder(
     params.set_generate_mipmaps(false);
     params.set_print_status_to_stdout(false);
     params.source_image_mut(0).init(rgba, width, height, 4);
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()) as u32;
-    let mut compressor = Compressor::new(threads);
+    // One thread: the encoder's own job pool (Basis Universal 1.16, `basisu::job_pool`) sets its
+    // kill flag without holding the mutex its workers wait on, so a worker that has just found no
+    // work can miss the wake-up and the pool's destructor then waits for it forever (seen as a
+    // hung bake). With one thread the pool has no workers and runs every job on the caller;
+    // callers encode several macro-textures in parallel instead (separate compressors, as the
+    // `basisu` tool's parallel mode does).
+    let mut compressor = Compressor::new(1);
     // SAFETY: the parameters are set through the crate's checked setters (format, quality in
     // range, one source image of `width × height` RGBA texels, validated by `prepare_image`)
     let ok = unsafe { compressor.init(&params) };
