@@ -8,7 +8,7 @@ use lemi_core::bundle::BlockMacro;
 use lemi_core::bundle::{CellHeader, Quad};
 use lemi_core::classify::TriRef;
 use lemi_core::compress::MacroTexture;
-use lemi_core::texel_scale::{self, TexelScale, TexelScaleTable};
+use lemi_core::texel_scale::{TexelScale, TexelScaleTable};
 use lemi_core::{Mesh, Scene};
 
 use super::atlas::{self, Atlas};
@@ -269,14 +269,15 @@ impl Bounds {
         origin: glam::DVec3::ZERO,
     };
 
-    /// Whether every quad of the draw shows texels of at least two pixels in `view` (so that the
-    /// footprint filter would take the texel under each pixel's centre, as nearest sampling does).
-    pub(super) fn texels_magnified(&self, view: &lemi_core::camera::View) -> bool {
-        let (Some(s), Some(theta)) = (self.texel_scale, texel_scale::pixel_angle(view)) else {
-            return false;
-        };
-        s.texels_per_pixel(view.eye().distance(self.origin), theta)
-            <= NEAREST_BELOW_TEXELS_PER_PIXEL
+    /// Whether every quad of the draw shows texels of at least two pixels to an eye at `eye`
+    /// whose pixels subtend at most `pixel_angle` ([`lemi_core::texel_scale::pixel_angle`] of the view), so
+    /// that the footprint filter would take the texel under each pixel's centre, as nearest
+    /// sampling does.
+    pub(super) fn texels_magnified(&self, eye: glam::DVec3, pixel_angle: f64) -> bool {
+        self.texel_scale.is_some_and(|s| {
+            s.texels_per_pixel(eye.distance(self.origin), pixel_angle)
+                <= NEAREST_BELOW_TEXELS_PER_PIXEL
+        })
     }
 
     fn add(&mut self, p: glam::DVec3) {

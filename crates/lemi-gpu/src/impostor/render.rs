@@ -493,6 +493,9 @@ impl ImpostorRenderer {
             scissor(&mut pass, window.as_ref());
             let mut pipeline = None;
             let (mut quad_draws, mut nearest_draws) = (0u32, 0u32);
+            // the frame's side of the texel scale bound, once for all draw calls
+            let footprint = self.texel_filter == TexelFilter::Footprint;
+            let seen = lemi_core::texel_scale::pixel_angle(view).map(|a| (view.eye(), a));
             for (cell, (vertices, indices)) in &quads {
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 pass.set_vertex_buffer(0, vertices.slice(..));
@@ -507,10 +510,8 @@ impl ImpostorRenderer {
                     }
                     // the footprint filter only where some texel may span less than two
                     // pixels: elsewhere it takes the centre texel, as the nearest pipeline does
-                    let filter =
-                        self.texel_filter == TexelFilter::Footprint && !b.texels_magnified(view);
-                    nearest_draws +=
-                        u32::from(!filter && self.texel_filter == TexelFilter::Footprint);
+                    let filter = footprint && !seen.is_some_and(|(e, a)| b.texels_magnified(e, a));
+                    nearest_draws += u32::from(footprint && !filter);
                     if pipeline != Some((filter, d.opaque)) {
                         let pipelines = &self.quad_pipelines[usize::from(filter)];
                         pass.set_pipeline(if d.opaque {
