@@ -410,11 +410,8 @@ impl CellHeader {
     /// an affine map, so a corner is still the farthest point).
     pub fn quad_reach(&self) -> f64 {
         let origin = self.quad_origin();
-        let (c, h) = (self.cell.center, self.cell.half);
-        (0..8)
-            .map(|k| {
-                let sign = |bit: u32| if k & (1 << bit) == 0 { -1.0 } else { 1.0 };
-                let corner = c + DVec3::new(sign(0) * h.x, sign(1) * h.y, sign(2) * h.z);
+        (self.cell.corners().iter())
+            .map(|&corner| {
                 let world = match &self.object {
                     Some(o) => o.frame.to_world(corner),
                     None => corner,
