@@ -223,11 +223,14 @@ pub fn run(args: Args) -> Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
+    // only the frames written to --frames-dir are read back; the rest are timed as a runtime
+    // draws them
+    let keep_frame = |index: u64| args.frames_dir.is_some() && index % args.every == 0;
     let mut observe = |event: WalkEvent<'_>| -> Result<(), String> {
         match event {
             WalkEvent::Preloading => bar.set_message("preloading the first cells"),
             WalkEvent::Impostor { record, frame } => {
-                if let Some(d) = &args.frames_dir {
+                if let (Some(d), Some(frame)) = (&args.frames_dir, frame) {
                     if record.frame % args.every == 0 {
                         let p = d.join(format!("frame-{:06}.png", record.frame));
                         image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba.clone())
@@ -261,6 +264,7 @@ pub fn run(args: Args) -> Result<()> {
             geometry: unculled,
             culled,
             observer: Some(&mut observe),
+            keep_frame: Some(&keep_frame),
             ..WalkOptions::new(&gpu, &scene, &manifest.grid)
         },
     )?;

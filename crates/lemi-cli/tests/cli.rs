@@ -667,7 +667,9 @@ fn walk_auto_writes_records_summary_and_plot() {
     }
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert!(csv.lines().count() > 2 * 10, "impostor and geometry rows");
-    // the written path replays
+    // the written path replays; frames are timed without a readback, except the ones written
+    // to --frames-dir, which are read back and written whole
+    let frames_dir = d.join("frames");
     let o = lemi(&[
         "walk",
         b,
@@ -676,10 +678,32 @@ fn walk_auto_writes_records_summary_and_plot() {
         "--size",
         "32x18",
         "--no-geometry",
+        "--frames-dir",
+        frames_dir.to_str().unwrap(),
+        "--every",
+        "4",
         "-o",
         d.join("walk2").to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    let n = v["frames"].as_u64().unwrap();
+    let mut written: Vec<String> = std::fs::read_dir(&frames_dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    written.sort();
+    let expected: Vec<String> = (0..n)
+        .step_by(4)
+        .map(|i| format!("frame-{i:06}.png"))
+        .collect();
+    assert_eq!(written, expected);
+    for f in &written {
+        let img = image::open(frames_dir.join(f)).unwrap().to_rgba8();
+        assert_eq!(img.dimensions(), (32, 18), "{f}");
+        // the city, not only the sky the frame is cleared to
+        let sky = lemi_walk::CLEAR;
+        assert!(img.pixels().any(|p| p.0 != sky), "{f} shows only the sky");
+    }
     // bad input
     assert_clean_error(
         &lemi(&["walk", b, "--path", "/nonexistent/p.json"]),

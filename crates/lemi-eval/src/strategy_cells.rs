@@ -55,6 +55,7 @@ impl CellRenderer for StrategyCells<'_> {
             view,
             options: &self.options,
             measure_error: true,
+            read_back: true,
         };
         let f = self
             .strategy
@@ -64,9 +65,15 @@ impl CellRenderer for StrategyCells<'_> {
         if f.fallback {
             self.fallback_views += 1;
         }
-        let n = f.frame.rgba.len() / 4;
+        let frame = f.frame.ok_or_else(|| {
+            EvalError::Job(format!(
+                "{} frame: the strategy returned no pixels",
+                self.strategy.kind()
+            ))
+        })?;
+        let n = frame.rgba.len() / 4;
         Ok(RenderedView {
-            frame: f.frame,
+            frame,
             error_px: f.error_px.unwrap_or_else(|| vec![f32::NAN; n]),
             gap_filled: None,
         })

@@ -169,11 +169,9 @@ impl Renderer {
         view: &View,
         options: &RenderOptions,
     ) -> Result<(Frame, CullStats), GpuError> {
-        let list = scene.geometry.cull(&view.view_proj());
-        let frame = self
-            .draw_culled(scene, &list, view, options, true)?
-            .ok_or_else(|| GpuError::Readback("no frame was read back".into()))?;
-        Ok((frame, CullStats::from(&list)))
+        let (frame, stats) = self.render_culled_frame(scene, view, options, true)?;
+        let frame = frame.ok_or_else(|| GpuError::Readback("no frame was read back".into()))?;
+        Ok((frame, stats))
     }
 
     /// [`Renderer::render_culled`] without the readback (see [`Renderer::render_no_readback`]).
@@ -183,9 +181,7 @@ impl Renderer {
         view: &View,
         options: &RenderOptions,
     ) -> Result<CullStats, GpuError> {
-        let list = scene.geometry.cull(&view.view_proj());
-        self.draw_culled(scene, &list, view, options, false)?;
-        Ok(CullStats::from(&list))
+        Ok(self.render_culled_frame(scene, view, options, false)?.1)
     }
 
     /// Renders like [`Renderer::render`] and waits until the GPU has finished, without copying or
@@ -198,6 +194,34 @@ impl Renderer {
         options: &RenderOptions,
     ) -> Result<(), GpuError> {
         self.draw(scene, view, options, false).map(|_| ())
+    }
+
+    /// Renders `scene` from `view` and, with `readback`, reads the frame back ([`Renderer::render`]);
+    /// without, waits until the GPU has finished and returns `None`
+    /// ([`Renderer::render_no_readback`]): what a caller that times frames as a runtime presents
+    /// them uses, reading back only the frames it keeps.
+    pub fn render_frame(
+        &self,
+        scene: &GpuScene,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        self.draw(scene, view, options, readback)
+    }
+
+    /// [`Renderer::render_culled`], reading the frame back only with `readback` (see
+    /// [`Renderer::render_frame`]).
+    pub fn render_culled_frame(
+        &self,
+        scene: &GpuCulledScene,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<(Option<Frame>, CullStats), GpuError> {
+        let list = scene.geometry.cull(&view.view_proj());
+        let frame = self.draw_culled(scene, &list, view, options, readback)?;
+        Ok((frame, CullStats::from(&list)))
     }
 
     /// GPU time of the last frame's render pass in milliseconds, from timestamp queries written at

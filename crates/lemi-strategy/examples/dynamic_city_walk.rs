@@ -69,6 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             view: &view,
             options: &options,
             measure_error: false,
+            read_back: true,
         })?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let st = s.last_frame().clone();

@@ -231,22 +231,24 @@ impl Strategy for HlodStrategy {
         let cell = located.map(|c| c.id());
         let (frame, near, far, fallback) = match slot.and_then(|i| self.cache.get(i)) {
             Some(c) => (
-                self.renderer.render(&c.scene, r.view, r.options)?,
+                self.renderer
+                    .render_frame(&c.scene, r.view, r.options, r.needs_pixels())?,
                 c.near_triangles,
                 c.far_triangles,
                 false,
             ),
             None => (
-                self.renderer.render(&self.full, r.view, r.options)?,
+                self.renderer
+                    .render_frame(&self.full, r.view, r.options, r.needs_pixels())?,
                 self.total_triangles,
                 0,
                 true,
             ),
         };
         let gpu_ms = self.renderer.last_gpu_ms();
-        let error_px = if r.measure_error {
-            let n = frame.depth.len();
-            match slot.and_then(|i| self.cache.get(i)) {
+        let error_px = match frame.as_ref().filter(|_| r.measure_error) {
+            None => None,
+            Some(frame) => match slot.and_then(|i| self.cache.get(i)) {
                 Some(c) => {
                     let reference = self.renderer.render(&self.full, r.view, r.options)?;
                     let center = c.cell.center;
@@ -255,10 +257,8 @@ impl Strategy for HlodStrategy {
                         (p - center).abs().max_element() > nf
                     }))
                 }
-                None => Some(vec![f32::NAN; n]),
-            }
-        } else {
-            None
+                None => Some(vec![f32::NAN; frame.depth.len()]),
+            },
         };
         Ok(StrategyFrame {
             frame,

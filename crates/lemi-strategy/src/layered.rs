@@ -110,7 +110,8 @@ impl Strategy for LayeredStrategy {
                     self.uploaded_cells += 1;
                 }
                 (
-                    self.impostors.render(c, r.view, r.options)?,
+                    self.impostors
+                        .render_frame(c, r.view, r.options, r.needs_pixels())?,
                     c.near_triangles(),
                     c.quad_count() as u64,
                     false,
@@ -118,7 +119,8 @@ impl Strategy for LayeredStrategy {
                 )
             }
             None => (
-                self.renderer.render(&self.full, r.view, r.options)?,
+                self.renderer
+                    .render_frame(&self.full, r.view, r.options, r.needs_pixels())?,
                 self.total_triangles,
                 0,
                 true,

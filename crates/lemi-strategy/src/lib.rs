@@ -179,12 +179,26 @@ pub struct FrameRequest<'a> {
     /// Also measure the per-pixel geometric error ([`StrategyFrame::error_px`]) if the strategy
     /// can (evaluation only; may be slow).
     pub measure_error: bool,
+    /// Read the frame's pixels back ([`StrategyFrame::frame`]). Without it a strategy draws the
+    /// frame and waits for the GPU, as a runtime that presents its frames does, and returns no
+    /// pixels where it can (a walk times its frames so, reading back only the frames it keeps);
+    /// strategies that finish the frame on the CPU read it back anyway.
+    pub read_back: bool,
+}
+
+impl FrameRequest<'_> {
+    /// Whether the frame's pixels are needed: asked for, or for measuring the error.
+    pub fn needs_pixels(&self) -> bool {
+        self.read_back || self.measure_error
+    }
 }
 
 /// One drawn frame and what it took.
 #[derive(Clone, Debug)]
 pub struct StrategyFrame {
-    pub frame: Frame,
+    /// The frame's pixels; `None` when the request did not ask for them
+    /// ([`FrameRequest::read_back`]) and the strategy drew the frame on the GPU alone.
+    pub frame: Option<Frame>,
     /// Id of the view cell the eye is in, if any.
     pub cell: Option<CellId>,
     /// Near-field triangles drawn (every triangle of the scene on a fallback frame).
@@ -209,6 +223,16 @@ pub struct StrategyFrame {
     /// between where the pixel's surface point truly is and where the frame shows it; `NaN` where
     /// it does not apply (background, near geometry). `None` if the strategy cannot measure it.
     pub error_px: Option<Vec<f32>>,
+}
+
+impl StrategyFrame {
+    /// The frame's pixels; an error when the request did not ask for them
+    /// ([`FrameRequest::read_back`]).
+    pub fn pixels(&self) -> Result<&Frame, StrategyError> {
+        self.frame.as_ref().ok_or_else(|| {
+            StrategyError::Invalid("the frame was drawn without reading its pixels back".into())
+        })
+    }
 }
 
 /// Totals of a strategy over its life (for the comparison tables).

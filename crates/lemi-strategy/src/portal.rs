@@ -319,12 +319,13 @@ impl Strategy for PortalStrategy {
                 .collect();
         }
         let quads = parts.cells.iter().map(|c| c.quad_count() as u64).sum();
-        let frame = self
-            .renderer
-            .render_composite(&parts, &self.materials, r.view, r.options, true)?
-            .ok_or_else(|| {
-                StrategyError::Invalid("the composite frame was not read back".into())
-            })?;
+        let frame = self.renderer.render_composite(
+            &parts,
+            &self.materials,
+            r.view,
+            r.options,
+            r.needs_pixels(),
+        )?;
         Ok(StrategyFrame {
             frame,
             cell: None,

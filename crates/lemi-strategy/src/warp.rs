@@ -946,7 +946,7 @@ impl WarpStrategy {
         let frame = self.renderer.render(full, r.view, r.options)?;
         let n = frame.depth.len();
         Ok(StrategyFrame {
-            frame,
+            frame: Some(frame),
             cell,
             near_triangles: triangles,
             far_primitives: 0,
@@ -1019,7 +1019,7 @@ impl Strategy for WarpStrategy {
             .measure_error
             .then(|| error_px(&cached.rec, r.view, &warped, &far));
         Ok(StrategyFrame {
-            frame,
+            frame: Some(frame),
             cell: cell_id,
             near_triangles: cached.near_list_len,
             far_primitives: warped.forward_mapped,

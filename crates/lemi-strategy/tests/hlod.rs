@@ -106,6 +106,7 @@ fn corner_errors(gpu: &Arc<Gpu>, bundle: &Bundle, scene: &Arc<Scene>) -> Vec<f32
                         view: &view,
                         options: &options,
                         measure_error: true,
+                        read_back: true,
                     })
                     .unwrap();
                 assert!(!f.fallback, "{eye} yaw {yaw}: fell back: {:?}", f.warnings);

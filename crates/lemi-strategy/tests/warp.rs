@@ -183,6 +183,7 @@ fn draw(st: &mut WarpStrategy, eye: DVec3, v: &View) -> (StrategyFrame, f64) {
             view: v,
             options: &options,
             measure_error: true,
+            read_back: true,
         })
         .expect("frame");
     (f, t.elapsed().as_secs_f64() * 1e3)
@@ -296,8 +297,8 @@ fn at_the_sample_point_the_warped_frame_matches_the_reference() {
         assert!(f.far_primitives > 0 && f.far_primitives <= 4 * (RES * RES) as u64);
         assert!(f.cache_bytes >= 4 * (RES * RES) as u64 * 8);
         let r = reference(&s, &v);
-        let d = compare(&f.frame, &r, 12);
-        dump(&format!("centre_{k}"), &[&r, &f.frame]);
+        let d = compare(f.pixels().expect("pixels"), &r, 12);
+        dump(&format!("centre_{k}"), &[&r, f.pixels().expect("pixels")]);
         let (max, mean, n) = error_stats(&f);
         eprintln!(
             "centre, looking {dir}: {:.1} % within 12, {} uncovered, error max {max:.2} mean {mean:.2} px over {n} px, {ms:.1} ms",
@@ -334,7 +335,10 @@ fn at_the_sample_point_the_warped_frame_matches_the_reference() {
     let (f, _) = draw(&mut st, out, &v);
     assert!(f.fallback && f.cell.is_none());
     assert_eq!(f.near_triangles, s.ctx.scene.triangle_count());
-    assert_eq!(compare(&f.frame, &reference(&s, &v), 0).within, 1.0);
+    assert_eq!(
+        compare(f.pixels().expect("pixels"), &reference(&s, &v), 0).within,
+        1.0
+    );
 }
 
 /// From a cell corner the recording is seen from 7 m off its sample point: disocclusions (what
@@ -373,10 +377,13 @@ fn from_a_corner_the_frame_is_recognisable_and_hole_filling_helps() {
         let (u, _) = draw(&mut unfilled, corner, &v);
         assert_eq!(f.cell.map(|c| c.to_string()).as_deref(), Some("1_0_0"));
         assert!(!f.fallback && !u.fallback);
-        let (df, du) = (compare(&f.frame, &r, 24), compare(&u.frame, &r, 24));
+        let (df, du) = (
+            compare(f.pixels().expect("pixels"), &r, 24),
+            compare(u.pixels().expect("pixels"), &r, 24),
+        );
         dump(
             &format!("corner_{:.0}_{:.0}_{fov}", 10.0 * dir.x, 10.0 * dir.z),
-            &[&r, &f.frame, &u.frame],
+            &[&r, f.pixels().expect("pixels"), u.pixels().expect("pixels")],
         );
         eprintln!(
             "corner, looking {dir:.2} ({fov}°): filled {:.1} % within 24, {} uncovered; unfilled {:.1} %, {} uncovered; {ms:.1} ms",
@@ -588,7 +595,10 @@ fn cells_are_recorded_once_evicted_by_the_lru_and_a_damaged_one_falls_back() {
         "{:?}",
         f.warnings
     );
-    assert_eq!(compare(&f.frame, &reference(&s, &v), 0).within, 1.0);
+    assert_eq!(
+        compare(f.pixels().expect("pixels"), &reference(&s, &v), 0).within,
+        1.0
+    );
     let (f, _) = draw(&mut st, eye, &v);
     assert!(f.fallback && f.warnings.is_empty());
     let eye = cell("0_0_0").center;

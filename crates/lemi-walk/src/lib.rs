@@ -36,4 +36,4 @@ pub use record::{
     nearest_rank, read_csv, to_csv, write_csv, FrameRecord, FrameStats, Mode, TimeStats,
     CSV_COLUMNS,
 };
-pub use run::{walk, WalkEvent, WalkOptions, WalkRun, WalkSummary};
+pub use run::{walk, WalkEvent, WalkOptions, WalkRun, WalkSummary, CLEAR};

@@ -253,6 +253,19 @@ impl ImpostorRenderer {
             .map(|_| ())
     }
 
+    /// Renders the cell like [`ImpostorRenderer::render`], reading the frame back only with
+    /// `readback` (else `None` once the GPU has finished, as
+    /// [`ImpostorRenderer::render_no_readback`]).
+    pub fn render_frame(
+        &self,
+        cell: &ImpostorCell,
+        view: &View,
+        options: &RenderOptions,
+        readback: bool,
+    ) -> Result<Option<Frame>, GpuError> {
+        self.render_parts(cell, view, options, true, readback)
+    }
+
     /// GPU time of the last frame's render pass (near geometry and quads) in milliseconds, from
     /// timestamp queries at its beginning and end, resolved in the frame's own submission; `None`
     /// before the first frame or without [`wgpu::Features::TIMESTAMP_QUERY`]. See

@@ -805,7 +805,7 @@ impl Strategy for DynamicStrategy {
             let cache_bytes = self.cache_bytes();
             self.report.peak_bytes = self.report.peak_bytes.max(cache_bytes);
             return Ok(StrategyFrame {
-                frame,
+                frame: Some(frame),
                 cell: id,
                 near_triangles: self.scene.triangle_count(),
                 far_primitives: 0,
@@ -828,15 +828,18 @@ impl Strategy for DynamicStrategy {
         }
         let t0 = Instant::now();
         let frame = match &self.drawn {
-            Some(d) => self.impostors.render(d, r.view, r.options)?,
+            Some(d) => self
+                .impostors
+                .render_frame(d, r.view, r.options, r.needs_pixels())?,
             None => return Err(StrategyError::Invalid("dynamic: cell not uploaded".into())),
         };
         self.last.draw_seconds = t0.elapsed().as_secs_f64();
         let billboards = self.billboards();
         let t0 = Instant::now();
-        let error_px = r
-            .measure_error
-            .then(|| measure_error(&frame, r.view, &billboards));
+        let error_px = frame
+            .as_ref()
+            .filter(|_| r.measure_error)
+            .map(|f| measure_error(f, r.view, &billboards));
         let n_billboards = billboards.len();
         self.last.error_seconds = t0.elapsed().as_secs_f64();
         let texels: u64 = self
