@@ -126,7 +126,9 @@ pub fn render_markdown(
         m,
         "\nColumns: *bake s/cell* and *disk/cell* from the bake (seconds and bytes over \
          the cells baked); *texture memory/cell*: bytes of far-field textures the runtime held for \
-         one cell; *median/p99 ms*: wall-clock frame time of the walk (readback included), \
+         one cell; *median/p99 ms*: wall-clock frame time of the walk, until the GPU has \
+         finished the frame, without reading it back (as a runtime presents it; warp finishes its \
+         frames on the CPU), \
          *GPU median ms*: the render passes alone (timestamp queries; only for strategies whose \
          frame is all GPU work), \
          *speed-up vs culled*: the geometry-culled median (all geometry drawn as a renderer would \

@@ -4,9 +4,11 @@
 //!
 //! # Frame time
 //! The statistics use [`FrameRecord::cpu_ms`], the wall-clock time of the whole frame on the CPU.
-//! The headless renderer reads every frame back, so that time includes the GPU's work on the frame
-//! (and the readback). [`FrameRecord::gpu_ms`] is the GPU time from timestamp queries when the
-//! caller has them (`None` otherwise); its medians are reported beside.
+//! The walk waits for every frame's GPU work to finish (without copying the pixels back, as a
+//! runtime that presents its frames; only the frames an observer keeps are read back, and warp
+//! finishes its frames on the CPU), so that time includes the GPU's work on the frame.
+//! [`FrameRecord::gpu_ms`] is the GPU time from timestamp queries when the caller has them
+//! (`None` otherwise); its medians are reported beside.
 //!
 //! # Percentiles
 //! Nearest rank: of `n` sorted values `x[1] ≤ … ≤ x[n]`, the p-th percentile is `x[⌈p/100 · n⌉]`
@@ -52,7 +54,7 @@ pub struct FrameRecord {
     /// Path time (seconds).
     pub t: f64,
     pub mode: Mode,
-    /// Wall-clock time of the frame (ms), readback included (see the module doc).
+    /// Wall-clock time of the frame (ms), until the GPU finished it (see the module doc).
     pub cpu_ms: f64,
     /// GPU time of the frame (ms) from timestamp queries, if available.
     pub gpu_ms: Option<f64>,
