@@ -100,25 +100,19 @@ impl GpuMaterials {
             let bind_groups = materials
                 .iter()
                 .map(|m| {
-                    let texture = m
-                        .texture
-                        .and_then(|t| views.get(t as usize).and_then(|v| v.as_ref()));
                     let uniform =
                         gpu.device
                             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                                 label: Some("lemi material"),
                                 contents: bytemuck::bytes_of(&MaterialUniform {
                                     base_color: m.base_color,
-                                    textured: [
-                                        f32::from(u8::from(texture.is_some())),
-                                        0.0,
-                                        0.0,
-                                        0.0,
-                                    ],
                                 }),
                                 usage: wgpu::BufferUsages::UNIFORM,
                             });
-                    let view = texture.unwrap_or(&white);
+                    let view = m
+                        .texture
+                        .and_then(|t| views.get(t as usize).and_then(|v| v.as_ref()))
+                        .unwrap_or(&white);
                     gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some(&m.name),
                         layout: gpu.material_layout(),

@@ -135,9 +135,6 @@ impl ShadingGlobals {
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct MaterialUniform {
     pub base_color: [f32; 4],
-    /// `[1, 0, 0, 0]` when the material has a texture, zeros when it does not (then the shader
-    /// does not sample the white texture bound in its place).
-    pub textured: [f32; 4],
 }
 
 /// Vertex attributes of [`lemi_core::Vertex`]: locations 0..=3 = position, normal, uv, colour.
