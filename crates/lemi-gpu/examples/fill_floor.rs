@@ -6,10 +6,15 @@
 //!
 //! ```text
 //! cargo run --release -p lemi-gpu --example fill_floor -- [--size WxH] [--reps N]
+//!     [--texel-filter footprint|nearest]
 //! ```
 //!
 //! A layered far field cannot cost less than the first line (one texel fetch and store per
-//! pixel); the rest shows what cutting it into quads and stacking layers add.
+//! pixel); the rest shows what cutting it into quads and stacking layers add. The texture's
+//! texels span about 1.2 pixels, so the default footprint filter takes one bilinear fetch a
+//! pixel; `--texel-filter nearest` gives the nearest-texel pipeline, the one a runtime frame
+//! takes for draw calls whose texels all span two pixels or more (the cells here carry no
+//! `SeenFrom`, so the renderer cannot choose it by itself).
 
 use std::sync::Arc;
 
@@ -18,12 +23,13 @@ use lemi_core::bundle::Quad;
 use lemi_core::camera::Camera;
 use lemi_core::compress::MacroTexture;
 use lemi_core::{Face, Material, Mesh, SceneBuilder, Vertex};
-use lemi_gpu::{GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions};
+use lemi_gpu::{GpuMaterials, ImpostorCell, ImpostorRenderer, RenderOptions, TexelFilter};
 
 type Error = Box<dyn std::error::Error>;
 
 fn main() -> Result<(), Error> {
     let (mut width, mut height, mut reps) = (1280u32, 720u32, 20usize);
+    let mut filter = TexelFilter::Footprint;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -33,6 +39,13 @@ fn main() -> Result<(), Error> {
                 (width, height) = (w.parse()?, h.parse()?);
             }
             "--reps" => reps = args.next().ok_or("--reps needs N")?.parse()?,
+            "--texel-filter" => {
+                filter = match args.next().as_deref() {
+                    Some("nearest") => TexelFilter::Nearest,
+                    Some("footprint") => TexelFilter::Footprint,
+                    v => return Err(format!("--texel-filter {v:?}: nearest or footprint").into()),
+                }
+            }
             _ => return Err(format!("unknown argument {a}").into()),
         }
     }
@@ -66,7 +79,8 @@ fn main() -> Result<(), Error> {
         &scene.materials,
         &scene.textures,
     )?);
-    let renderer = ImpostorRenderer::new(&gpu)?;
+    let mut renderer = ImpostorRenderer::new(&gpu)?;
+    renderer.set_texel_filter(filter);
     let fov = 60.0;
     let view = Camera::new(DVec3::ZERO, -DVec3::Z, DVec3::Y, fov, width, height)?.view();
     // A square at depth z covering the whole view, with a 1024² texture.
@@ -118,7 +132,7 @@ fn main() -> Result<(), Error> {
     };
     let options = RenderOptions::default();
     println!(
-        "{}: {width}x{height}, GPU medians over {reps} frames (render_impostors_only, timestamps: passes only)",
+        "{}: {width}x{height}, {filter:?} texels, GPU medians over {reps} frames (render_impostors_only, timestamps: passes only)",
         gpu.describe()
     );
     for (label, n, holes, layers) in [
