@@ -156,7 +156,7 @@ impl Renderer {
         view: &View,
         options: &RenderOptions,
     ) -> Result<Frame, GpuError> {
-        self.draw(scene, view, options, true)
+        self.render_frame(scene, view, options, true)
             .and_then(|f| f.ok_or_else(|| GpuError::Readback("no frame was read back".into())))
     }
 
@@ -193,21 +193,7 @@ impl Renderer {
         view: &View,
         options: &RenderOptions,
     ) -> Result<(), GpuError> {
-        self.draw(scene, view, options, false).map(|_| ())
-    }
-
-    /// Renders `scene` from `view` and, with `readback`, reads the frame back ([`Renderer::render`]);
-    /// without, waits until the GPU has finished and returns `None`
-    /// ([`Renderer::render_no_readback`]): what a caller that times frames as a runtime presents
-    /// them uses, reading back only the frames it keeps.
-    pub fn render_frame(
-        &self,
-        scene: &GpuScene,
-        view: &View,
-        options: &RenderOptions,
-        readback: bool,
-    ) -> Result<Option<Frame>, GpuError> {
-        self.draw(scene, view, options, readback)
+        self.render_frame(scene, view, options, false).map(|_| ())
     }
 
     /// [`Renderer::render_culled`], reading the frame back only with `readback` (see
@@ -233,7 +219,11 @@ impl Renderer {
         self.last_gpu.get()
     }
 
-    fn draw(
+    /// Renders `scene` from `view` and, with `readback`, reads the frame back ([`Renderer::render`]);
+    /// without, waits until the GPU has finished and returns `None`
+    /// ([`Renderer::render_no_readback`]): what a caller that times frames as a runtime presents
+    /// them uses, reading back only the frames it keeps.
+    pub fn render_frame(
         &self,
         scene: &GpuScene,
         view: &View,
