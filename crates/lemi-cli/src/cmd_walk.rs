@@ -231,7 +231,8 @@ pub fn run(args: Args) -> Result<()> {
             WalkEvent::Preloading => bar.set_message("preloading the first cells"),
             WalkEvent::Impostor { record, frame } => {
                 if let (Some(d), Some(frame)) = (&args.frames_dir, frame) {
-                    if record.frame % args.every == 0 {
+                    // warp gives every frame's pixels; only the kept ones are written
+                    if keep_frame(record.frame) {
                         let p = d.join(format!("frame-{:06}.png", record.frame));
                         image::RgbaImage::from_raw(frame.width, frame.height, frame.rgba.clone())
                             .ok_or("frame has the wrong size")?
