@@ -4,8 +4,10 @@
 //! One pass, no MSAA (comparisons want exact texels), no back-face culling (polygon soups), reverse-Z
 //! depth test (`Greater`, cleared to 0; see `lemi_core::camera`), shading from the shared module
 //! ([`crate::shading`]). A second colour target stores the view depth (distance along the view axis)
-//! as `R32Float`, so the depth image is linear on every backend. Readback pads rows to wgpu's
-//! 256-byte `COPY_BYTES_PER_ROW_ALIGNMENT`.
+//! as the bits of an f32 in `R32Uint`, so the depth image is linear on every backend. Readback
+//! pads rows to wgpu's 256-byte `COPY_BYTES_PER_ROW_ALIGNMENT`. A frame that is not read back
+//! (`render_frame`, as a runtime presenting its frames draws them) has no view-depth target: the
+//! same colour without a second store per fragment.
 
 use std::ops::Range;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -107,6 +109,12 @@ pub struct Renderer {
 }
 
 impl Renderer {
+    /// The cached render targets (tests read what a frame left in them).
+    #[cfg(test)]
+    pub(crate) fn targets(&self) -> &Mutex<Option<Targets>> {
+        &self.targets
+    }
+
     pub fn new(gpu: &Gpu) -> Result<Renderer, GpuError> {
         gpu.scoped("creating the reference render pipeline", || {
             let device = &gpu.device;
@@ -330,8 +338,10 @@ impl Renderer {
                     label: Some("lemi render"),
                 });
             {
-                let mut pass = targets.begin_timed_pass(&mut encoder, "lemi reference pass");
-                pass.set_pipeline(self.pipelines.for_cutoff(options.alpha_cutoff));
+                // the view depth only where the frame is read back
+                let mut pass =
+                    targets.begin_timed_pass(&mut encoder, "lemi reference pass", readback);
+                pass.set_pipeline(self.pipelines.for_cutoff(options.alpha_cutoff, readback));
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
                 let mut buffers: Option<&GpuChunk> = None;
@@ -365,15 +375,18 @@ impl Renderer {
     }
 }
 
-/// The colour targets of a frame: sRGB colour and the view depth's bits.
-pub(crate) fn frame_targets() -> [Option<wgpu::ColorTargetState>; 2] {
-    [COLOR_FORMAT, VIEW_DEPTH_FORMAT].map(|format| {
-        Some(wgpu::ColorTargetState {
-            format,
-            blend: None,
-            write_mask: wgpu::ColorWrites::ALL,
-        })
-    })
+/// The colour targets of a frame: sRGB colour and, with `view_depth`, the view depth's bits (the
+/// shaders write both; a pipeline without the second target drops that output).
+pub(crate) fn frame_targets(view_depth: bool) -> [Option<wgpu::ColorTargetState>; 2] {
+    let target = |format| wgpu::ColorTargetState {
+        format,
+        blend: None,
+        write_mask: wgpu::ColorWrites::ALL,
+    };
+    [
+        Some(target(COLOR_FORMAT)),
+        view_depth.then(|| target(VIEW_DEPTH_FORMAT)),
+    ]
 }
 
 /// The depth state of a frame: reverse-Z (`Greater`, cleared to 0), written.
@@ -402,8 +415,9 @@ pub(crate) fn frame_primitive() -> wgpu::PrimitiveState {
 /// both draw the same pixels; without the shader's `discard` the rasterizer may test depth
 /// before shading (Mesa's does), as any renderer draws opaque geometry.
 pub(crate) struct GeometryPipelines {
-    masked: wgpu::RenderPipeline,
-    opaque: wgpu::RenderPipeline,
+    /// By view-depth target: without (0, frames not read back) and with (1).
+    masked: [wgpu::RenderPipeline; 2],
+    opaque: [wgpu::RenderPipeline; 2],
 }
 
 impl GeometryPipelines {
@@ -415,8 +429,7 @@ impl GeometryPipelines {
         module: &wgpu::ShaderModule,
         label: &str,
     ) -> GeometryPipelines {
-        let targets = frame_targets();
-        let pipeline = |fragment: &str| {
+        let pipeline = |fragment: &str, view_depth: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -433,24 +446,26 @@ impl GeometryPipelines {
                     module,
                     entry_point: Some(fragment),
                     compilation_options: Default::default(),
-                    targets: &targets,
+                    targets: &frame_targets(view_depth),
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
         GeometryPipelines {
-            masked: pipeline("fs_main"),
-            opaque: pipeline("fs_main_opaque"),
+            masked: [false, true].map(|v| pipeline("fs_main", v)),
+            opaque: [false, true].map(|v| pipeline("fs_main_opaque", v)),
         }
     }
 
-    /// The pipeline for an alpha cutoff: the one without the test when nothing can be below it.
-    pub(crate) fn for_cutoff(&self, cutoff: f32) -> &wgpu::RenderPipeline {
+    /// The pipeline for an alpha cutoff (the one without the test when nothing can be below it),
+    /// for a pass with or without the view-depth target.
+    pub(crate) fn for_cutoff(&self, cutoff: f32, view_depth: bool) -> &wgpu::RenderPipeline {
+        let v = usize::from(view_depth);
         if cutoff > 0.0 {
-            &self.masked
+            &self.masked[v]
         } else {
-            &self.opaque
+            &self.opaque[v]
         }
     }
 }

@@ -134,18 +134,22 @@ impl Targets {
         encoder: &'e mut wgpu::CommandEncoder,
         label: &str,
     ) -> wgpu::RenderPass<'e> {
-        self.begin_pass_part(encoder, label, PassPart::Whole, false, false)
+        self.begin_pass_part(encoder, label, PassPart::Whole, false, false, true)
     }
 
     /// Like [`Targets::begin_pass`], with timestamps written at the beginning and the end of the
     /// pass when the device supports them; [`Targets::resolve_timer`] after the pass and
-    /// [`Targets::read_frame`] (or [`Targets::read_timer`]) turn them into milliseconds.
+    /// [`Targets::read_frame`] (or [`Targets::read_timer`]) turn them into milliseconds. Without
+    /// `view_depth` the pass has no view-depth target (pipelines of [`frame_targets`]`(false)`).
+    ///
+    /// [`frame_targets`]: crate::renderer::frame_targets
     pub(crate) fn begin_timed_pass<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
         label: &str,
+        view_depth: bool,
     ) -> wgpu::RenderPass<'e> {
-        self.begin_pass_part(encoder, label, PassPart::Whole, false, true)
+        self.begin_pass_part(encoder, label, PassPart::Whole, false, true, view_depth)
     }
 
     /// Whether the colour target also has a linear (`Rgba8Unorm`) view, see
@@ -159,7 +163,9 @@ impl Targets {
     /// renders colour through the `Rgba8Unorm` view of the sRGB colour texture, so fragment
     /// outputs are stored as they are, without sRGB encoding (ignored without such a view,
     /// [`Targets::has_linear_color`]). `timed`: the frame's timestamps (beginning in the first
-    /// part, end in the last).
+    /// part, end in the last). `view_depth`: whether the pass writes the view-depth target; a
+    /// frame that is not read back has no use for it, and leaves it out as a renderer presenting
+    /// its frames would (it costs a store per fragment on a software rasterizer).
     pub(crate) fn begin_pass_part<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
@@ -167,6 +173,7 @@ impl Targets {
         part: PassPart,
         linear_color: bool,
         timed: bool,
+        view_depth: bool,
     ) -> wgpu::RenderPass<'e> {
         let first = matches!(part, PassPart::Whole | PassPart::First);
         let last = matches!(part, PassPart::Whole | PassPart::Last);
@@ -200,7 +207,7 @@ impl Targets {
                     resolve_target: None,
                     ops: color_ops,
                 }),
-                Some(wgpu::RenderPassColorAttachment {
+                view_depth.then_some(wgpu::RenderPassColorAttachment {
                     view: &self.view_depth,
                     depth_slice: None,
                     resolve_target: None,

@@ -74,7 +74,8 @@
 //!   view along a cube axis then draws about one face of quads.
 //! - Targets, formats and readback are those of [`crate::Renderer::render`]: sRGB colour, the
 //!   linear view depth as the bits of an f32 in an `R32Uint` target, a `Depth32Float` reverse-Z
-//!   depth buffer, background set to [`RenderOptions::clear`] and depth `f32::INFINITY`. With
+//!   depth buffer, background set to [`RenderOptions::clear`] and depth `f32::INFINITY`; frames
+//!   not read back leave the view-depth target out, as the reference renderer's do. With
 //!   linear quads a frame is two render passes, near geometry (sRGB view) then quads (linear
 //!   view), the second loading the first's targets; timestamp queries around both give
 //!   [`ImpostorRenderer::last_gpu_ms`].

@@ -78,12 +78,13 @@ pub struct ImpostorRenderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     near_pipelines: crate::renderer::GeometryPipelines,
-    /// Quad pipelines by filter ([`TexelFilter::Nearest`], [`TexelFilter::Footprint`]: the
+    /// Quad pipelines by view-depth target (without: frames not read back; with) and filter
+    /// ([`TexelFilter::Nearest`], [`TexelFilter::Footprint`]: the
     /// shader's `FOOTPRINT` constant, so the texel filter costs nothing where it is off, not even
     /// on a software rasterizer, which runs both sides of a branch) and kind: quads some of whose
     /// texels fail the alpha test (`fs_quad`, with `discard`) and quads all of whose texels pass
     /// it (`fs_quad_opaque`, no `discard`).
-    quad_pipelines: [QuadPipelines; 2],
+    quad_pipelines: [[QuadPipelines; 2]; 2],
     /// The macro-texture format this renderer's quad pipelines expect ([`macro_format`]);
     /// `Rgba8Unorm` means the quads are drawn through the colour target's linear view.
     macro_format: wgpu::TextureFormat,
@@ -108,7 +109,6 @@ impl ImpostorRenderer {
     pub fn new(gpu: &Gpu) -> Result<ImpostorRenderer, GpuError> {
         gpu.scoped("creating the impostor render pipelines", || {
             let device = &gpu.device;
-            let color_targets = crate::renderer::frame_targets();
             let depth_stencil = Some(crate::renderer::frame_depth_stencil());
             let primitive = crate::renderer::frame_primitive();
             // Near geometry: the reference renderer's exact source and state.
@@ -140,51 +140,59 @@ impl ImpostorRenderer {
             });
             // The quads' colour target: the linear view where macro-textures are linear.
             let macro_format = macro_format(device);
-            let mut quad_targets = color_targets.clone();
-            if macro_format == wgpu::TextureFormat::Rgba8Unorm {
-                quad_targets[0] = Some(wgpu::ColorTargetState {
-                    format: LINEAR_COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                });
-            }
-            let quad_pipeline_for = |label: &str, entry_point: &str, footprint: bool| {
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some(label),
-                    layout: Some(&quad_layout),
-                    vertex: wgpu::VertexState {
-                        module: &quad_module,
-                        entry_point: Some("vs_quad"),
-                        compilation_options: Default::default(),
-                        buffers: &[Some(quad_vertex_layout())],
-                    },
-                    primitive,
-                    depth_stencil: depth_stencil.clone(),
-                    multisample: wgpu::MultisampleState::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &quad_module,
-                        entry_point: Some(entry_point),
-                        compilation_options: wgpu::PipelineCompilationOptions {
-                            constants: &[("FOOTPRINT", f64::from(u8::from(footprint)))],
-                            ..Default::default()
-                        },
-                        targets: &quad_targets,
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
+            let quad_targets = |view_depth: bool| {
+                let mut targets = crate::renderer::frame_targets(view_depth);
+                if macro_format == wgpu::TextureFormat::Rgba8Unorm {
+                    targets[0] = Some(wgpu::ColorTargetState {
+                        format: LINEAR_COLOR_FORMAT,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    });
+                }
+                targets
             };
-            let quad_pipelines = [false, true].map(|footprint| QuadPipelines {
-                alpha_tested: quad_pipeline_for(
-                    "lemi impostor renderer: quads",
-                    "fs_quad",
-                    footprint,
-                ),
-                opaque: quad_pipeline_for(
-                    "lemi impostor renderer: opaque quads",
-                    "fs_quad_opaque",
-                    footprint,
-                ),
+            let quad_pipeline_for =
+                |label: &str, entry_point: &str, footprint: bool, view_depth| {
+                    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                        label: Some(label),
+                        layout: Some(&quad_layout),
+                        vertex: wgpu::VertexState {
+                            module: &quad_module,
+                            entry_point: Some("vs_quad"),
+                            compilation_options: Default::default(),
+                            buffers: &[Some(quad_vertex_layout())],
+                        },
+                        primitive,
+                        depth_stencil: depth_stencil.clone(),
+                        multisample: wgpu::MultisampleState::default(),
+                        fragment: Some(wgpu::FragmentState {
+                            module: &quad_module,
+                            entry_point: Some(entry_point),
+                            compilation_options: wgpu::PipelineCompilationOptions {
+                                constants: &[("FOOTPRINT", f64::from(u8::from(footprint)))],
+                                ..Default::default()
+                            },
+                            targets: &quad_targets(view_depth),
+                        }),
+                        multiview_mask: None,
+                        cache: None,
+                    })
+                };
+            let quad_pipelines = [false, true].map(|view_depth| {
+                [false, true].map(|footprint| QuadPipelines {
+                    alpha_tested: quad_pipeline_for(
+                        "lemi impostor renderer: quads",
+                        "fs_quad",
+                        footprint,
+                        view_depth,
+                    ),
+                    opaque: quad_pipeline_for(
+                        "lemi impostor renderer: opaque quads",
+                        "fs_quad_opaque",
+                        footprint,
+                        view_depth,
+                    ),
+                })
             });
             let globals = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("lemi impostor globals"),
@@ -461,9 +469,13 @@ impl ImpostorRenderer {
                 },
                 linear && !draw_near,
                 true,
+                readback,
             );
             if draw_near {
-                pass.set_pipeline(self.near_pipelines.for_cutoff(options.alpha_cutoff));
+                pass.set_pipeline(
+                    self.near_pipelines
+                        .for_cutoff(options.alpha_cutoff, readback),
+                );
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
                 let groups = std::iter::once((None, &parts.geometry))
@@ -501,6 +513,7 @@ impl ImpostorRenderer {
                     PassPart::Last,
                     true,
                     true,
+                    readback,
                 );
             }
             scissor(&mut pass, window.as_ref());
@@ -526,7 +539,8 @@ impl ImpostorRenderer {
                     let filter = footprint && !seen.is_some_and(|(e, a)| b.texels_magnified(e, a));
                     nearest_draws += u32::from(footprint && !filter);
                     if pipeline != Some((filter, d.opaque)) {
-                        let pipelines = &self.quad_pipelines[usize::from(filter)];
+                        let pipelines =
+                            &self.quad_pipelines[usize::from(readback)][usize::from(filter)];
                         pass.set_pipeline(if d.opaque {
                             &pipelines.opaque
                         } else {
@@ -612,5 +626,70 @@ mod tests {
             .expect("reference without readback");
         check(reference.last_gpu_ms());
         assert!(reference.render(&all, &view, &opts).expect("again") == want);
+    }
+
+    /// The colour a frame left in `targets`, read back after the fact (background alpha 0).
+    fn colour_left_in(gpu: &crate::Gpu, targets: &Mutex<Option<Targets>>) -> Vec<u8> {
+        let guard = targets.lock().expect("targets");
+        let t = guard.as_ref().expect("a frame was drawn");
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        t.copy_rects_to_readback(&mut encoder, &[t.whole()], false);
+        gpu.queue.submit([encoder.finish()]);
+        t.read_rects(&gpu.device, &[t.whole()], false)
+            .expect("colour")
+            .rgba
+    }
+
+    /// The read-back frame's colour with the background at alpha 0, as the target holds it.
+    fn as_stored(frame: &Frame) -> Vec<u8> {
+        let mut rgba = frame.rgba.clone();
+        for (px, d) in rgba.chunks_exact_mut(4).zip(&frame.depth) {
+            if *d == f32::INFINITY {
+                px.copy_from_slice(&[0; 4]);
+            }
+        }
+        rgba
+    }
+
+    #[test]
+    fn frames_without_readback_draw_the_same_colour_without_the_view_depth_target() {
+        let Some(gpu) = gpu() else { return };
+        let scene = scene();
+        let materials =
+            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+        let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1)];
+        let quads = [
+            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
+            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
+        ];
+        let cell =
+            ImpostorCell::upload(&gpu, materials.clone(), &scene, &[[0, 0]], &quads, &macros)
+                .expect("upload");
+        let view = view();
+        let opts = RenderOptions {
+            clear: [0; 4],
+            ..RenderOptions::default()
+        };
+        let r = ImpostorRenderer::new(&gpu).expect("renderer");
+        let frame = r.render(&cell, &view, &opts).expect("render");
+        let want = as_stored(&frame);
+        // the near geometry and both kinds of quads are in the picture
+        let drawn = want.chunks_exact(4).filter(|p| p[3] == 255).count();
+        assert!(drawn > 500, "{drawn} pixels drawn");
+        r.render_no_readback(&cell, &view, &opts)
+            .expect("no readback");
+        assert!(colour_left_in(&gpu, &r.targets) == want, "impostor frame");
+        let reference = crate::Renderer::new(&gpu).expect("reference renderer");
+        let all = GpuScene::upload(&gpu, &scene, &UploadOptions::default()).expect("scene");
+        let want = as_stored(&reference.render(&all, &view, &opts).expect("reference"));
+        reference
+            .render_no_readback(&all, &view, &opts)
+            .expect("reference without readback");
+        assert!(
+            colour_left_in(&gpu, reference.targets()) == want,
+            "reference frame"
+        );
     }
 }
