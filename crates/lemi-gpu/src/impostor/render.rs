@@ -585,20 +585,25 @@ mod tests {
     use crate::impostor::test_support::{gpu, pattern, quad, scene, view};
     use crate::{GpuMaterials, GpuScene, UploadOptions};
 
-    #[test]
-    fn gpu_times_and_frames_without_readback() {
-        let Some(gpu) = gpu() else { return };
+    /// The test scene, and a cell of it: its first triangle as near geometry, two quads.
+    fn scene_and_cell(gpu: &crate::Gpu) -> (lemi_core::Scene, ImpostorCell) {
         let scene = scene();
         let materials =
-            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
+            Arc::new(GpuMaterials::upload(gpu, &scene.materials, &scene.textures).expect("mats"));
         let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1)];
         let quads = [
             quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
             quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
         ];
-        let near = [[0u32, 0u32]];
-        let cell = ImpostorCell::upload(&gpu, materials.clone(), &scene, &near, &quads, &macros)
+        let cell = ImpostorCell::upload(gpu, materials, &scene, &[[0, 0]], &quads, &macros)
             .expect("upload");
+        (scene, cell)
+    }
+
+    #[test]
+    fn gpu_times_and_frames_without_readback() {
+        let Some(gpu) = gpu() else { return };
+        let (scene, cell) = scene_and_cell(&gpu);
         let view = view();
         let opts = RenderOptions::default();
         let check = |ms: Option<f64>| {
@@ -656,17 +661,7 @@ mod tests {
     #[test]
     fn frames_without_readback_draw_the_same_colour_without_the_view_depth_target() {
         let Some(gpu) = gpu() else { return };
-        let scene = scene();
-        let materials =
-            Arc::new(GpuMaterials::upload(&gpu, &scene.materials, &scene.textures).expect("mats"));
-        let macros = vec![pattern(13, 9, 0), pattern(32, 16, 1)];
-        let quads = [
-            quad(0, [0, 0, 13, 9], [-4.0, -0.5, 0.5, 3.5, -5.0]),
-            quad(1, [0, 0, 32, 16], [-3.0, 3.0, -3.5, 0.0, -6.0]),
-        ];
-        let cell =
-            ImpostorCell::upload(&gpu, materials.clone(), &scene, &[[0, 0]], &quads, &macros)
-                .expect("upload");
+        let (scene, cell) = scene_and_cell(&gpu);
         let view = view();
         let opts = RenderOptions {
             clear: [0; 4],
