@@ -23,9 +23,7 @@ fn text(o: &Output) -> (String, String) {
 }
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("lemi-view-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::tmp("view", name)
 }
 
 /// A small bundle (2 cells with impostors), baked once for the tests of this file.

@@ -23,6 +23,9 @@ pub fn stderr(o: &Output) -> String {
 /// A fresh directory for one test, named after the suite, the process and `name`.
 pub fn tmp(suite: &str, name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("lemi-{suite}-{}-{name}", std::process::id()));
+    // process ids repeat: what an earlier run with this id left (a bundle `lemi bake` would skip
+    // as already baked) must not leak into this one
+    let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
 }
