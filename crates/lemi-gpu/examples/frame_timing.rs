@@ -337,29 +337,6 @@ fn quad_overdraw(quads: &[lemi_core::bundle::Quad], view: &View, behind: &Frame,
     let mut count = vec![0u16; w * h];
     let (mut total, mut hidden) = (0u64, 0u64);
     let (mut visible_quads, mut visible_area, mut on_screen) = (0u64, 0u64, 0u64);
-    for q in quads {
-        let Some((px, nearest, _)) = quad_pixels(q, view) else {
-            continue;
-        };
-        if px.is_empty() {
-            continue;
-        }
-        on_screen += 1;
-        total += px.len() as u64;
-        let mut seen = false;
-        for i in px.iter().copied() {
-            if f64::from(behind.depth[i]) < nearest * (1.0 - 1e-4) {
-                hidden += 1;
-            } else {
-                count[i] = count[i].saturating_add(1);
-                seen = true;
-            }
-        }
-        if seen {
-            visible_quads += 1;
-            visible_area += px.len() as u64;
-        }
-    }
     // what occlusion culling against a depth tile map of `behind` could leave out: the farthest
     // depth per 16-pixel tile, a quad culled where its nearest depth lies beyond that of every
     // tile its pixels touch
@@ -378,16 +355,29 @@ fn quad_overdraw(quads: &[lemi_core::bundle::Quad], view: &View, behind: &Frame,
         if px.is_empty() {
             continue;
         }
+        on_screen += 1;
+        total += px.len() as u64;
+        let mut seen = false;
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-        for &i in &px {
+        for i in px.iter().copied() {
+            if f64::from(behind.depth[i]) < nearest * (1.0 - 1e-4) {
+                hidden += 1;
+            } else {
+                count[i] = count[i].saturating_add(1);
+                seen = true;
+            }
             x0 = x0.min(i % w / TILE);
             x1 = x1.max(i % w / TILE);
             y0 = y0.min(i / w / TILE);
             y1 = y1.max(i / w / TILE);
         }
-        let hidden_all = (y0..=y1)
+        if seen {
+            visible_quads += 1;
+            visible_area += px.len() as u64;
+        }
+        let tiles_hide = (y0..=y1)
             .all(|ty| (x0..=x1).all(|tx| f64::from(far[ty * tw + tx]) < nearest * (1.0 - 1e-4)));
-        if hidden_all {
+        if tiles_hide {
             tile_culled += 1;
             tile_culled_area += px.len() as u64;
         }
