@@ -178,7 +178,10 @@ const REC_ATTRIBUTES: [wgpu::VertexAttribute; 12] = wgpu::vertex_attr_array![
 pub struct LayerRecorder {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipeline: wgpu::RenderPipeline,
+    /// By material kind: untextured (0, the shader's `TEXTURED` constant off: the white texel's
+    /// sample taken as the constant 1, no fetch) and textured (1); the same texels for an
+    /// untextured material ([`crate::GpuMaterials::textured`]).
+    pipelines: [wgpu::RenderPipeline; 2],
     globals: wgpu::Buffer,
     globals_group: wgpu::BindGroup,
     res: u32,
@@ -208,52 +211,57 @@ impl LayerRecorder {
                 bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
                 immediate_size: 0,
             });
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("lemi layer recorder"),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<RecVertex>() as wgpu::BufferAddress,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &REC_ATTRIBUTES,
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[
-                        Some(wgpu::ColorTargetState {
-                            format: COLOR_FORMAT,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        }),
-                        Some(wgpu::ColorTargetState {
-                            format: VIEW_DEPTH_FORMAT,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::ALL,
-                        }),
-                    ],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let pipeline = |textured: bool| {
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some("lemi layer recorder"),
+                    layout: Some(&layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some("vs_main"),
+                        compilation_options: Default::default(),
+                        buffers: &[Some(wgpu::VertexBufferLayout {
+                            array_stride: std::mem::size_of::<RecVertex>() as wgpu::BufferAddress,
+                            step_mode: wgpu::VertexStepMode::Vertex,
+                            attributes: &REC_ATTRIBUTES,
+                        })],
+                    },
+                    primitive: wgpu::PrimitiveState {
+                        topology: wgpu::PrimitiveTopology::TriangleList,
+                        cull_mode: None,
+                        ..Default::default()
+                    },
+                    depth_stencil: Some(wgpu::DepthStencilState {
+                        format: DEPTH_FORMAT,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(wgpu::CompareFunction::Greater),
+                        stencil: Default::default(),
+                        bias: Default::default(),
+                    }),
+                    multisample: wgpu::MultisampleState::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some("fs_main"),
+                        compilation_options: wgpu::PipelineCompilationOptions {
+                            constants: &[("TEXTURED", f64::from(u8::from(textured)))],
+                            ..Default::default()
+                        },
+                        targets: &[
+                            Some(wgpu::ColorTargetState {
+                                format: COLOR_FORMAT,
+                                blend: None,
+                                write_mask: wgpu::ColorWrites::ALL,
+                            }),
+                            Some(wgpu::ColorTargetState {
+                                format: VIEW_DEPTH_FORMAT,
+                                blend: None,
+                                write_mask: wgpu::ColorWrites::ALL,
+                            }),
+                        ],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            };
             let globals = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("lemi recorder globals"),
                 size: std::mem::size_of::<ShadingGlobals>() as u64,
@@ -271,7 +279,7 @@ impl LayerRecorder {
             LayerRecorder {
                 device: gpu.device.clone(),
                 queue: gpu.queue.clone(),
-                pipeline,
+                pipelines: [pipeline(false), pipeline(true)],
                 globals,
                 globals_group,
                 res,
@@ -433,11 +441,16 @@ impl LayerRecorder {
             {
                 let mut pass = targets.begin_pass(&mut encoder, "lemi layer pass");
                 if let Some(buffer) = &buffer {
-                    pass.set_pipeline(&self.pipeline);
                     pass.set_bind_group(0, &self.globals_group, &[]);
                     pass.set_vertex_buffer(0, buffer.slice(..));
+                    let mut pipeline = None;
                     for r in runs.iter().filter(|r| r.count > 0) {
                         if let Some(g) = materials.bind_group(r.material) {
+                            let textured = materials.textured(r.material);
+                            if pipeline != Some(textured) {
+                                pass.set_pipeline(&self.pipelines[usize::from(textured)]);
+                                pipeline = Some(textured);
+                            }
                             pass.set_bind_group(1, g, &[]);
                             pass.draw(3 * r.first..3 * (r.first + r.count), 0..1);
                         }

@@ -341,12 +341,21 @@ impl Renderer {
                 // the view depth only where the frame is read back
                 let mut pass =
                     targets.begin_timed_pass(&mut encoder, "lemi reference pass", readback);
-                pass.set_pipeline(self.pipelines.for_cutoff(options.alpha_cutoff, readback));
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
+                let mut pipeline = None;
                 let mut buffers: Option<&GpuChunk> = None;
                 for (chunk, range) in draws {
                     if bound != Some(chunk.material) {
+                        let textured = materials.textured(chunk.material);
+                        if pipeline != Some(textured) {
+                            pass.set_pipeline(self.pipelines.for_material(
+                                options.alpha_cutoff,
+                                readback,
+                                textured,
+                            ));
+                            pipeline = Some(textured);
+                        }
                         if let Some(g) = materials.bind_group(chunk.material) {
                             pass.set_bind_group(1, g, &[]);
                         }
@@ -413,15 +422,19 @@ pub(crate) fn frame_primitive() -> wgpu::PrimitiveState {
 /// view-depth targets with the reverse-Z depth test, no culling (polygon soups): one with the
 /// alpha test, and one without it for a cutoff of 0 (the default), which no albedo is below, so
 /// both draw the same pixels; without the shader's `discard` the rasterizer may test depth
-/// before shading (Mesa's does), as any renderer draws opaque geometry.
+/// before shading (Mesa's does), as any renderer draws opaque geometry. Each for textured
+/// materials and for untextured ones (the shader's `TEXTURED` constant: the white texel's sample,
+/// exactly 1, taken as a constant, so no fetch), which draw the same pixels for an untextured
+/// material.
 pub(crate) struct GeometryPipelines {
-    /// By view-depth target: without (0, frames not read back) and with (1).
-    masked: [wgpu::RenderPipeline; 2],
-    opaque: [wgpu::RenderPipeline; 2],
+    /// By material kind (untextured: 0, textured: 1), then view-depth target: without (0,
+    /// frames not read back) and with (1).
+    masked: [[wgpu::RenderPipeline; 2]; 2],
+    opaque: [[wgpu::RenderPipeline; 2]; 2],
 }
 
 impl GeometryPipelines {
-    /// Both pipelines from `module` (the shading module with `render.wgsl`) with `layout`
+    /// The pipelines from `module` (the shading module with `render.wgsl`) with `layout`
     /// (globals and material bind groups).
     pub(crate) fn new(
         device: &wgpu::Device,
@@ -429,7 +442,7 @@ impl GeometryPipelines {
         module: &wgpu::ShaderModule,
         label: &str,
     ) -> GeometryPipelines {
-        let pipeline = |fragment: &str, view_depth: bool| {
+        let pipeline = |fragment: &str, textured: bool, view_depth: bool| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(layout),
@@ -445,27 +458,39 @@ impl GeometryPipelines {
                 fragment: Some(wgpu::FragmentState {
                     module,
                     entry_point: Some(fragment),
-                    compilation_options: Default::default(),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &[("TEXTURED", f64::from(u8::from(textured)))],
+                        ..Default::default()
+                    },
                     targets: &frame_targets(view_depth),
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
+        let both = |fragment: &str| {
+            [false, true].map(|textured| [false, true].map(|v| pipeline(fragment, textured, v)))
+        };
         GeometryPipelines {
-            masked: [false, true].map(|v| pipeline("fs_main", v)),
-            opaque: [false, true].map(|v| pipeline("fs_main_opaque", v)),
+            masked: both("fs_main"),
+            opaque: both("fs_main_opaque"),
         }
     }
 
     /// The pipeline for an alpha cutoff (the one without the test when nothing can be below it),
-    /// for a pass with or without the view-depth target.
-    pub(crate) fn for_cutoff(&self, cutoff: f32, view_depth: bool) -> &wgpu::RenderPipeline {
-        let v = usize::from(view_depth);
+    /// for a pass with or without the view-depth target, for a material with or without a
+    /// texture ([`crate::GpuMaterials::textured`]).
+    pub(crate) fn for_material(
+        &self,
+        cutoff: f32,
+        view_depth: bool,
+        textured: bool,
+    ) -> &wgpu::RenderPipeline {
+        let (t, v) = (usize::from(textured), usize::from(view_depth));
         if cutoff > 0.0 {
-            &self.masked[v]
+            &self.masked[t][v]
         } else {
-            &self.opaque[v]
+            &self.opaque[t][v]
         }
     }
 }

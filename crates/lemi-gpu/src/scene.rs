@@ -39,6 +39,8 @@ impl Default for UploadOptions {
 /// A scene's materials on the GPU, one bind group per material (group 1 of the shading module).
 pub struct GpuMaterials {
     bind_groups: Vec<wgpu::BindGroup>,
+    /// Per material, whether it samples a texture of its own (else the 1×1 white one).
+    textured: Vec<bool>,
 }
 
 impl GpuMaterials {
@@ -97,6 +99,14 @@ impl GpuMaterials {
                 mipmap_filter: wgpu::MipmapFilterMode::Linear,
                 ..Default::default()
             });
+            let texture_view = |m: &Material| {
+                m.texture
+                    .and_then(|t| views.get(t as usize).and_then(|v| v.as_ref()))
+            };
+            let textured = materials
+                .iter()
+                .map(|m| texture_view(m).is_some())
+                .collect();
             let bind_groups = materials
                 .iter()
                 .map(|m| {
@@ -109,10 +119,7 @@ impl GpuMaterials {
                                 }),
                                 usage: wgpu::BufferUsages::UNIFORM,
                             });
-                    let view = m
-                        .texture
-                        .and_then(|t| views.get(t as usize).and_then(|v| v.as_ref()))
-                        .unwrap_or(&white);
+                    let view = texture_view(m).unwrap_or(&white);
                     gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                         label: Some(&m.name),
                         layout: gpu.material_layout(),
@@ -133,7 +140,10 @@ impl GpuMaterials {
                     })
                 })
                 .collect();
-            GpuMaterials { bind_groups }
+            GpuMaterials {
+                bind_groups,
+                textured,
+            }
         })
     }
 
@@ -148,6 +158,13 @@ impl GpuMaterials {
     /// The bind group of material `i` (for group 1 of the shading module).
     pub fn bind_group(&self, i: u32) -> Option<&wgpu::BindGroup> {
         self.bind_groups.get(i as usize)
+    }
+
+    /// Whether material `i` samples a texture of its own; `false` for one that samples the 1×1
+    /// white texture, which pipelines for untextured materials draw without a fetch (`true` for
+    /// an unknown material: its pipeline then samples whatever is bound).
+    pub fn textured(&self, i: u32) -> bool {
+        self.textured.get(i as usize).copied().unwrap_or(true)
     }
 }
 

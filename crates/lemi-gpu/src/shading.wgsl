@@ -67,13 +67,21 @@ fn transform_vertex(v: VertexIn) -> VertexOut {
     return out;
 }
 
+// Whether the pipeline draws textured materials, fixed per pipeline (a pipeline constant). An
+// untextured material has a bound 1×1 white texture, whose sample is exactly 1; its pipeline
+// (TEXTURED = false) takes that 1 as a constant, so the compiler drops the fetch (a trilinear,
+// sRGB-decoding sample that costs about as much as the rest of the shading on a software
+// rasterizer) and the albedo is bit for bit what the sample would give.
+override TEXTURED: bool = true;
+
 // Linear RGBA albedo of a fragment: base colour factor × texture × vertex colour. Untextured
-// materials sample a bound 1×1 white texture. The fetch stays outside any branch: a fetch inside
-// one (skipping the white texture) made Mesa's lavapipe 22.3 keep memory for every fragment group
+// materials sample a bound 1×1 white texture where TEXTURED is set. The fetch stays outside any
+// branch (a `select` on a pipeline constant, which the compiler folds): a fetch inside one
+// (skipping the white texture) made Mesa's lavapipe 22.3 keep memory for every fragment group
 // it shaded, for the life of the device (a 6-cell bake grew to 11 GB, and recorded at half speed);
 // tests/recorder_memory.rs fails if such a fetch comes back.
 fn surface_albedo(in: VertexOut) -> vec4<f32> {
-    let t = textureSample(base_texture, base_sampler, in.uv);
+    let t = select(vec4<f32>(1.0), textureSample(base_texture, base_sampler, in.uv), TEXTURED);
     return material.base_color * t * in.color;
 }
 

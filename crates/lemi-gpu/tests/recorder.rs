@@ -438,6 +438,46 @@ fn recording_is_deterministic() {
     assert_eq!(a, b);
 }
 
+/// An untextured material is recorded by the pipeline without the texture fetch (the white
+/// texel's sample taken as the constant 1): the layer is texel for texel and depth for depth the
+/// one recorded when the material samples an explicit 1×1 white texture.
+#[test]
+fn untextured_material_records_what_a_white_texture_records() {
+    let Some(gpu) = gpu() else { return };
+    let rec = LayerRecorder::new(&gpu, 64).expect("recorder");
+    let material = |texture| Material {
+        name: "tinted".into(),
+        base_color: [0.7, 0.5, 0.9, 1.0],
+        texture,
+    };
+    let white = Texture {
+        name: "white".into(),
+        width: 1,
+        height: 1,
+        rgba8: vec![255; 4],
+    };
+    let untextured = GpuMaterials::upload(&gpu, &[material(None)], &[]).expect("mats");
+    let textured = GpuMaterials::upload(&gpu, &[material(Some(0))], std::slice::from_ref(&white))
+        .expect("mats");
+    assert!(!untextured.textured(0) && textured.textured(0));
+    let surface = wavy_surface(Face::PosY, 12);
+    let record = |mats: &GpuMaterials| {
+        rec.record(
+            mats,
+            DVec3::ZERO,
+            Face::PosY,
+            &surface,
+            &all_runs(&surface),
+            0.1,
+            &Lighting::default(),
+        )
+        .expect("record")
+    };
+    let (a, b) = (record(&untextured), record(&textured));
+    assert!(a.covered_count() > 1000);
+    assert!(a == b, "the untextured pipeline records other texels");
+}
+
 #[test]
 fn bad_runs_and_parameters_are_errors() {
     let Some(gpu) = gpu() else { return };

@@ -406,3 +406,68 @@ fn geometry_without_the_alpha_test_draws_what_the_alpha_test_draws() {
         opaque.covered_count()
     );
 }
+
+/// Untextured materials are drawn by pipelines that take the white texel's sample as the constant
+/// 1 instead of fetching it (`TEXTURED` off): the picture is, pixel for pixel and depth for
+/// depth, the one drawn when the same materials sample an explicit 1×1 white texture through the
+/// textured pipelines, with and without the alpha test, and a textured material drawn after an
+/// untextured one in the same pass still shows its texture.
+#[test]
+fn untextured_materials_draw_what_sampling_a_white_texture_draws() {
+    let Some(gpu) = gpu() else { return };
+    let untextured = bumpy_scene(24);
+    let mut textured = untextured.clone();
+    textured.textures.push(Texture {
+        name: "white".into(),
+        width: 1,
+        height: 1,
+        rgba8: vec![255; 4],
+    });
+    for m in &mut textured.materials {
+        m.texture = Some(0);
+    }
+    let r = Renderer::new(&gpu).expect("renderer");
+    for cutoff in [0.0, 0.5] {
+        let options = RenderOptions {
+            alpha_cutoff: cutoff,
+            ..Default::default()
+        };
+        let draw = |scene: &Scene| {
+            let gs = GpuScene::upload(&gpu, scene, &UploadOptions::default()).expect("upload");
+            r.render(&gs, &camera().view(), &options).expect("render")
+        };
+        let (a, b) = (draw(&untextured), draw(&textured));
+        assert!(a.covered_count() > 1000);
+        assert!(
+            a == b,
+            "cutoff {cutoff}: untextured and white-textured materials draw different pictures"
+        );
+    }
+    // the second material textured red, the first untextured: the pipeline follows the material
+    let mut mixed = untextured;
+    mixed.textures.push(Texture {
+        name: "red".into(),
+        width: 1,
+        height: 1,
+        rgba8: vec![255, 0, 0, 255],
+    });
+    mixed.materials[1].texture = Some(0);
+    let gs = GpuScene::upload(&gpu, &mixed, &UploadOptions::default()).expect("upload");
+    let f = r
+        .render(&gs, &camera().view(), &RenderOptions::default())
+        .expect("render");
+    let (mut red, mut other) = (0, 0);
+    for y in 0..64 {
+        for x in 0..64 {
+            match f.pixel(x, y) {
+                Some([_, 0, 0, 255]) => red += 1,
+                Some([_, _, _, 255]) => other += 1,
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        red > 100 && other > 100,
+        "{red} pixels of the red-textured material, {other} of the untextured one"
+    );
+}

@@ -472,12 +472,9 @@ impl ImpostorRenderer {
                 readback,
             );
             if draw_near {
-                pass.set_pipeline(
-                    self.near_pipelines
-                        .for_cutoff(options.alpha_cutoff, readback),
-                );
                 pass.set_bind_group(0, &self.globals_group, &[]);
                 let mut bound = None;
+                let mut near_pipeline = None;
                 let groups = std::iter::once((None, &parts.geometry))
                     .chain(parts.scissored.iter().map(|(w, r)| (Some(w), r)))
                     .chain(std::iter::once((window.as_ref(), &parts.windowed)));
@@ -495,6 +492,15 @@ impl ImpostorRenderer {
                         continue;
                     }
                     if bound != Some(chunk.material) {
+                        let textured = materials.textured(chunk.material);
+                        if near_pipeline != Some(textured) {
+                            pass.set_pipeline(self.near_pipelines.for_material(
+                                options.alpha_cutoff,
+                                readback,
+                                textured,
+                            ));
+                            near_pipeline = Some(textured);
+                        }
                         if let Some(g) = materials.bind_group(chunk.material) {
                             pass.set_bind_group(1, g, &[]);
                         }
