@@ -245,6 +245,10 @@ fn remove(
     // the margin μ of the layers so far (negative: not covered); every covered texel lies in
     // `g_rect`
     let mut g = vec![-1.0f64; n];
+    // the margins of the layer after, written inside its region only; -1 elsewhere (two
+    // buffers of `n` for the whole face, not one per layer: at 2048² a layer's margins are
+    // 32 MB, which the system would otherwise zero 255 times a face)
+    let mut next = vec![-1.0f64; n];
     let mut g_rect = TexelRect::empty();
     let mut hidden = vec![false; n];
     let count = layers.len();
@@ -288,7 +292,6 @@ fn remove(
                 || (layer.rgba[4 * i + 3] >= OPAQUE_ALPHA
                     && (options.clip_border_occludes || !layer.border[i]))
         });
-        let mut next = vec![-1.0f64; n];
         let w = region.width() as usize;
         let step = if k > 0 { factors[k - 1] } else { 0.0 };
         for (y, row) in region.rows(res).enumerate() {
@@ -301,13 +304,16 @@ fn remove(
                 next[i] = d[y * w + x].max(carried);
             }
         }
-        // hidden marks of layer k are done with: clear them inside the old rectangle
+        // hidden marks of layer k are done with, and so are the margins μ_{k−1}: clear both
+        // inside the old rectangle (where alone they were set), so that `g` is −1 outside its
+        // rectangle once it becomes `next`
         for row in g_rect.rows(res) {
             for i in row {
                 hidden[i] = false;
+                g[i] = -1.0;
             }
         }
-        g = next;
+        std::mem::swap(&mut g, &mut next);
         g_rect = region;
     }
     stats.opaque_after = stats.opaque_before - stats.removed;
