@@ -331,7 +331,7 @@ fn box_margin(
     r: usize,
     weights: [&[f64]; 2],
     cap: i32,
-    member: impl Fn(usize) -> bool,
+    member: impl Fn(usize) -> bool + Sync,
 ) -> Vec<f64> {
     if rect.is_empty() {
         return Vec::new();
@@ -341,9 +341,8 @@ fn box_margin(
     // the horizontal half-run of every texel: the largest a with [x − a, x + a] in the set
     // (−1 outside it), from the runs to the left and to the right
     let mut half_run = vec![-1i32; w * h];
-    let mut run = vec![0i32; w];
-    for y in 0..h {
-        let row = &mut half_run[y * w..(y + 1) * w];
+    half_run.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        let mut run = vec![0i32; w];
         let mut left = 0;
         for (x, run) in run.iter_mut().enumerate() {
             left = if member((y0 + y) * r + x0 + x) {
@@ -362,9 +361,11 @@ fn box_margin(
             };
             row[x] = run[x].min(right) - 1;
         }
-    }
+    });
+    // rows are independent: in parallel (a face's layers are a chain, so this is where the
+    // second core helps)
     let mut out = vec![-1.0f64; w * h];
-    for y in 0..h {
+    out.par_chunks_mut(w).enumerate().for_each(|(y, out_row)| {
         let wy = weights[1][y0 + y];
         for x in 0..w {
             let m0 = half_run[y * w + x];
@@ -393,8 +394,8 @@ fn box_margin(
                     break;
                 }
             }
-            out[y * w + x] = best;
+            out_row[x] = best;
         }
-    }
+    });
     out
 }
