@@ -249,6 +249,7 @@ fn remove(
     // buffers of `n` for the whole face, not one per layer: at 2048² a layer's margins are
     // 32 MB, which the system would otherwise zero 255 times a face)
     let mut next = vec![-1.0f64; n];
+    let (mut d, mut half_run) = (Vec::new(), Vec::new());
     let mut g_rect = TexelRect::empty();
     let mut hidden = vec![false; n];
     let count = layers.len();
@@ -287,11 +288,19 @@ fn remove(
         }
         // U_k: hidden, or opaque (and not a clip-border texel unless those occlude); its margin
         let region = hidden_rect.union(&layer.content);
-        let d = box_margin(&region, r, weights, cap, |i| {
-            hidden[i]
-                || (layer.rgba[4 * i + 3] >= OPAQUE_ALPHA
-                    && (options.clip_border_occludes || !layer.border[i]))
-        });
+        box_margin(
+            &region,
+            r,
+            weights,
+            cap,
+            |i| {
+                hidden[i]
+                    || (layer.rgba[4 * i + 3] >= OPAQUE_ALPHA
+                        && (options.clip_border_occludes || !layer.border[i]))
+            },
+            &mut half_run,
+            &mut d,
+        );
         let w = region.width() as usize;
         let step = if k > 0 { factors[k - 1] } else { 0.0 };
         for (y, row) in region.rows(res).enumerate() {
@@ -326,21 +335,28 @@ fn remove(
 /// `w_y = weights[1][y]` (image coordinates): a movement of up to `μ·w_x` texels along x and
 /// `μ·w_y` along y stays inside the set. `-1` outside the set; texels outside `rect` or the
 /// image are not in it; `M_b` is counted up to `cap`.
+/// The result goes to `out` (`rect.width() × rect.height()`, row-major); `half_run` is scratch.
+/// Both keep their memory from one call to the next: at 2048² a layer's margins are up to 32 MB,
+/// which fresh allocations would make the system zero again for every layer.
 fn box_margin(
     rect: &TexelRect,
     r: usize,
     weights: [&[f64]; 2],
     cap: i32,
     member: impl Fn(usize) -> bool + Sync,
-) -> Vec<f64> {
+    half_run: &mut Vec<i32>,
+    out: &mut Vec<f64>,
+) {
+    out.clear();
     if rect.is_empty() {
-        return Vec::new();
+        return;
     }
     let (w, h) = (rect.width() as usize, rect.height() as usize);
     let (x0, y0) = (rect.x0 as usize, rect.y0 as usize);
     // the horizontal half-run of every texel: the largest a with [x − a, x + a] in the set
-    // (−1 outside it), from the runs to the left and to the right
-    let mut half_run = vec![-1i32; w * h];
+    // (−1 outside it), from the runs to the left and to the right (every entry is written)
+    half_run.clear();
+    half_run.resize(w * h, -1);
     half_run.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         let mut run = vec![0i32; w];
         let mut left = 0;
@@ -364,7 +380,8 @@ fn box_margin(
     });
     // rows are independent: in parallel (a face's layers are a chain, so this is where the
     // second core helps)
-    let mut out = vec![-1.0f64; w * h];
+    out.resize(w * h, -1.0);
+    let half_run = &*half_run;
     out.par_chunks_mut(w).enumerate().for_each(|(y, out_row)| {
         let wy = weights[1][y0 + y];
         for x in 0..w {
@@ -397,5 +414,4 @@ fn box_margin(
             out_row[x] = best;
         }
     });
-    out
 }
