@@ -342,25 +342,16 @@ impl Renderer {
                 let mut pass =
                     targets.begin_timed_pass(&mut encoder, "lemi reference pass", readback);
                 pass.set_bind_group(0, &self.globals_group, &[]);
-                let mut bound = None;
-                let mut pipeline = None;
+                let mut bound = BoundMaterial::default();
                 let mut buffers: Option<&GpuChunk> = None;
                 for (chunk, range) in draws {
-                    if bound != Some(chunk.material) {
-                        let textured = materials.textured(chunk.material);
-                        if pipeline != Some(textured) {
-                            pass.set_pipeline(self.pipelines.for_material(
-                                options.alpha_cutoff,
-                                readback,
-                                textured,
-                            ));
-                            pipeline = Some(textured);
-                        }
-                        if let Some(g) = materials.bind_group(chunk.material) {
-                            pass.set_bind_group(1, g, &[]);
-                        }
-                        bound = Some(chunk.material);
-                    }
+                    self.pipelines.bind_material(
+                        &mut pass,
+                        materials,
+                        chunk.material,
+                        (options.alpha_cutoff, readback),
+                        &mut bound,
+                    );
                     if !buffers.is_some_and(|b| std::ptr::eq(b, *chunk)) {
                         pass.set_vertex_buffer(0, chunk.vertices.slice(..));
                         pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
@@ -492,6 +483,40 @@ impl GeometryPipelines {
         } else {
             &self.opaque[t][v]
         }
+    }
+}
+
+/// What a pass has bound for geometry so far: the material (group 1) and the kind of pipeline.
+#[derive(Default)]
+pub(crate) struct BoundMaterial {
+    material: Option<u32>,
+    textured: Option<bool>,
+}
+
+impl GeometryPipelines {
+    /// Binds `material`'s bind group and the pipeline of its kind (textured or not; `frame`: the
+    /// alpha cutoff and whether the pass has the view-depth target), each only where it differs
+    /// from what `bound` says the pass has.
+    pub(crate) fn bind_material(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        materials: &GpuMaterials,
+        material: u32,
+        (cutoff, view_depth): (f32, bool),
+        bound: &mut BoundMaterial,
+    ) {
+        if bound.material == Some(material) {
+            return;
+        }
+        let textured = materials.textured(material);
+        if bound.textured != Some(textured) {
+            pass.set_pipeline(self.for_material(cutoff, view_depth, textured));
+            bound.textured = Some(textured);
+        }
+        if let Some(g) = materials.bind_group(material) {
+            pass.set_bind_group(1, g, &[]);
+        }
+        bound.material = Some(material);
     }
 }
 

@@ -415,25 +415,27 @@ fn textured_gouraud_quad_matches_the_reference_renderer() {
     }
 }
 
+/// A wavy surface facing +Y recorded into one 64² layer with `mats` (material 0).
+fn record_wavy(rec: &LayerRecorder, mats: &GpuMaterials) -> LayerFrame {
+    let surface = wavy_surface(Face::PosY, 12);
+    rec.record(
+        mats,
+        DVec3::ZERO,
+        Face::PosY,
+        &surface,
+        &all_runs(&surface),
+        0.1,
+        &Lighting::default(),
+    )
+    .expect("record")
+}
+
 #[test]
 fn recording_is_deterministic() {
     let Some(gpu) = gpu() else { return };
     let rec = LayerRecorder::new(&gpu, 64).expect("recorder");
     let mats = white_materials(&gpu);
-    let surface = wavy_surface(Face::PosY, 12);
-    let record = || {
-        rec.record(
-            &mats,
-            DVec3::ZERO,
-            Face::PosY,
-            &surface,
-            &all_runs(&surface),
-            0.1,
-            &Lighting::default(),
-        )
-        .expect("record")
-    };
-    let (a, b): (LayerFrame, LayerFrame) = (record(), record());
+    let (a, b): (LayerFrame, LayerFrame) = (record_wavy(&rec, &mats), record_wavy(&rec, &mats));
     assert!(a.covered_count() > 1000);
     assert_eq!(a, b);
 }
@@ -460,20 +462,7 @@ fn untextured_material_records_what_a_white_texture_records() {
     let textured = GpuMaterials::upload(&gpu, &[material(Some(0))], std::slice::from_ref(&white))
         .expect("mats");
     assert!(!untextured.textured(0) && textured.textured(0));
-    let surface = wavy_surface(Face::PosY, 12);
-    let record = |mats: &GpuMaterials| {
-        rec.record(
-            mats,
-            DVec3::ZERO,
-            Face::PosY,
-            &surface,
-            &all_runs(&surface),
-            0.1,
-            &Lighting::default(),
-        )
-        .expect("record")
-    };
-    let (a, b) = (record(&untextured), record(&textured));
+    let (a, b) = (record_wavy(&rec, &untextured), record_wavy(&rec, &textured));
     assert!(a.covered_count() > 1000);
     assert!(a == b, "the untextured pipeline records other texels");
 }

@@ -473,8 +473,7 @@ impl ImpostorRenderer {
             );
             if draw_near {
                 pass.set_bind_group(0, &self.globals_group, &[]);
-                let mut bound = None;
-                let mut near_pipeline = None;
+                let mut bound = crate::renderer::BoundMaterial::default();
                 let groups = std::iter::once((None, &parts.geometry))
                     .chain(parts.scissored.iter().map(|(w, r)| (Some(w), r)))
                     .chain(std::iter::once((window.as_ref(), &parts.windowed)));
@@ -491,21 +490,13 @@ impl ImpostorRenderer {
                     if range.is_empty() {
                         continue;
                     }
-                    if bound != Some(chunk.material) {
-                        let textured = materials.textured(chunk.material);
-                        if near_pipeline != Some(textured) {
-                            pass.set_pipeline(self.near_pipelines.for_material(
-                                options.alpha_cutoff,
-                                readback,
-                                textured,
-                            ));
-                            near_pipeline = Some(textured);
-                        }
-                        if let Some(g) = materials.bind_group(chunk.material) {
-                            pass.set_bind_group(1, g, &[]);
-                        }
-                        bound = Some(chunk.material);
-                    }
+                    self.near_pipelines.bind_material(
+                        &mut pass,
+                        materials,
+                        chunk.material,
+                        (options.alpha_cutoff, readback),
+                        &mut bound,
+                    );
                     pass.set_vertex_buffer(0, chunk.vertices.slice(..));
                     pass.set_index_buffer(chunk.indices.slice(..), wgpu::IndexFormat::Uint32);
                     pass.draw_indexed(range.clone(), 0, 0..1);
