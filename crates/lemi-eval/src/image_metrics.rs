@@ -77,6 +77,11 @@ pub struct SilhouetteStats {
     /// pixels' distances to the closed slit's sides, not the slit's outline's distance to the
     /// nearest outline of the other frame.
     pub displacement: crate::stats::PixelErrorStats,
+    /// Whether a distance may be overstated because the image ends: some pixel's distance (in
+    /// [`Self::distances`] or [`Self::displacement`]) exceeds its distance to the frames' edge,
+    /// beyond which the other frame may cover what the measurement cannot see. Measure such a
+    /// view again on frames with a guard band ([`silhouettes_within`]).
+    pub edge_bound: bool,
     /// Pixels the test covers where the reference shows background.
     pub false_coverage: u64,
 }
@@ -483,22 +488,69 @@ fn envelope_1d(f: &[f64], out: &mut Vec<f64>) {
 /// the false-coverage pixels (the test shows something where the reference shows background).
 pub fn silhouettes(reference: &Frame, test: &Frame) -> Result<SilhouetteStats, EvalError> {
     check_pair(reference, test)?;
+    let whole = GuardBand {
+        px: 0,
+        width: reference.width,
+        height: reference.height,
+    };
+    silhouettes_within(reference, test, whole)
+}
+
+/// The part of a frame that is the output view, inside a band of `px` pixels on every side: frames
+/// rendered with the output view's focal length and `2·px` more pixels across and down, so that
+/// the output view's pixels are those at `[px, px + width) × [px, px + height)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GuardBand {
+    pub px: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// [`silhouettes`] of the output view inside frames with a guard band (`band`): the distances are
+/// taken to the other frame's outlines and coverage anywhere in the frames, and kept for the
+/// pixels of the output view only. A distance of up to `band.px` is then exact even at the output
+/// view's edge, where [`silhouettes`] on frames of the output size alone cannot see that the
+/// other frame covers a pixel just beyond it (and overstates the distance).
+pub fn silhouettes_within(
+    reference: &Frame,
+    test: &Frame,
+    band: GuardBand,
+) -> Result<SilhouetteStats, EvalError> {
+    check_pair(reference, test)?;
     let (w, h) = (reference.width as usize, reference.height as usize);
+    let (g, iw, ih) = (band.px as usize, band.width as usize, band.height as usize);
+    if g + iw > w || g + ih > h {
+        return Err(EvalError::Job(format!(
+            "a {iw}x{ih} view inside a guard band of {g} px does not fit a {w}x{h} frame"
+        )));
+    }
+    let inside = |i: usize| (g..g + iw).contains(&(i % w)) && (g..g + ih).contains(&(i / w));
+    // how far a pixel lies from the nearest pixel beyond the frame
+    let to_edge = |i: usize| {
+        let (x, y) = (i % w, i / w);
+        (x + 1).min(y + 1).min(w - x).min(h - y) as f32
+    };
     let covered = |f: &Frame| f.depth.iter().map(|d| d.is_finite()).collect::<Vec<bool>>();
     let (rc, tc) = (covered(reference), covered(test));
-    let false_coverage = rc.iter().zip(&tc).filter(|(r, t)| !**r && **t).count() as u64;
+    let false_coverage = (0..w * h).filter(|&i| inside(i) && !rc[i] && tc[i]).count() as u64;
     let (re, te) = (silhouette_mask(&rc, w, h), silhouette_mask(&tc, w, h));
     let (rd, td) = (
         squared_distance_transform(&re, w, h),
         squared_distance_transform(&te, w, h),
     );
+    let mut edge_bound = false;
+    let mut keep = |values: &mut Vec<f32>, i: usize, d2: f64| {
+        let d = d2.sqrt() as f32;
+        edge_bound |= d > to_edge(i);
+        values.push(d);
+    };
     let mut values = Vec::new();
-    for i in 0..w * h {
+    for i in (0..w * h).filter(|&i| inside(i)) {
         if te[i] {
-            values.push(rd[i].sqrt() as f32);
+            keep(&mut values, i, rd[i]);
         }
         if re[i] {
-            values.push(td[i].sqrt() as f32);
+            keep(&mut values, i, td[i]);
         }
     }
     let (rcd, tcd) = (
@@ -506,10 +558,10 @@ pub fn silhouettes(reference: &Frame, test: &Frame) -> Result<SilhouetteStats, E
         squared_distance_transform(&tc, w, h),
     );
     let mut displaced = Vec::new();
-    for i in 0..w * h {
+    for i in (0..w * h).filter(|&i| inside(i)) {
         match (rc[i], tc[i]) {
-            (true, false) => displaced.push(tcd[i].sqrt() as f32),
-            (false, true) => displaced.push(rcd[i].sqrt() as f32),
+            (true, false) => keep(&mut displaced, i, tcd[i]),
+            (false, true) => keep(&mut displaced, i, rcd[i]),
             _ if re[i] || te[i] => displaced.push(0.0),
             _ => {}
         }
@@ -517,6 +569,7 @@ pub fn silhouettes(reference: &Frame, test: &Frame) -> Result<SilhouetteStats, E
     Ok(SilhouetteStats {
         distances: crate::stats::PixelErrorStats::from_values(&values),
         displacement: crate::stats::PixelErrorStats::from_values(&displaced),
+        edge_bound,
         false_coverage,
     })
 }

@@ -26,8 +26,8 @@ pub use compare::{layered_crack_tolerance, side_by_side, SideBySide};
 pub use evaluate::{evaluate_view, ViewEval};
 pub use image_metrics::{
     coverage, crack_pixels, flip, mse_from_psnr, mse_rgb, ppd_default, ppd_for_monitor,
-    ppd_for_view, psnr, psnr_from_mse, silhouettes, ssim, Coverage, CrackStats, FlipResult,
-    SilhouetteStats, MAX_CRACK_SAMPLES,
+    ppd_for_view, psnr, psnr_from_mse, silhouettes, silhouettes_within, ssim, Coverage, CrackStats,
+    FlipResult, GuardBand, SilhouetteStats, MAX_CRACK_SAMPLES,
 };
 pub use lemi_gpu::Frame;
 pub use report::{

@@ -23,7 +23,10 @@ use lemi_gpu::{
 };
 
 use crate::report::{BundleResult, CellResult, WorstSet, WorstView};
-use crate::{evaluate_view, ppd_for_view, EvalError, PixelErrorStats, WORST_PER_BUNDLE};
+use crate::{
+    evaluate_view, ppd_for_view, silhouettes_within, EvalError, GuardBand, PixelErrorStats,
+    WORST_PER_BUNDLE,
+};
 
 /// Which viewpoints of a cell to evaluate.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -263,6 +266,35 @@ pub fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Came
         DVec3::Y
     };
     Camera::new(eye, dir, up, fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
+}
+
+/// The guard band of a view whose outline distances reach the image's edge
+/// ([`SilhouetteStats::edge_bound`]): distances up to this many pixels are then exact at the edge
+/// too, larger ones may still be overstated there (never understated). The silhouette aims are
+/// about 1-2 px; 8 px measures what lies between.
+pub const GUARD_BAND_PX: u32 = 8;
+
+/// The camera of [`camera`] with a guard band: `band.px` more pixels on every side of the
+/// `band.width × band.height` view of horizontal field of view `fov_x` (degrees), at the same focal
+/// length, so that the view's pixels are the frame's `[px, px + width) × [px, px + height)`.
+pub fn guard_band_camera(
+    eye: DVec3,
+    dir: DVec3,
+    fov_x: f64,
+    band: GuardBand,
+) -> Result<Camera, EvalError> {
+    let (w, g) = (f64::from(band.width), f64::from(band.px));
+    let wide_fov_x = 2.0
+        * ((0.5 * fov_x.to_radians()).tan() * (w + 2.0 * g) / w)
+            .atan()
+            .to_degrees();
+    camera(
+        eye,
+        dir,
+        wide_fov_x,
+        band.width + 2 * band.px,
+        band.height + 2 * band.px,
+    )
 }
 
 /// What the evaluation asks of the images it judges: one view of one cell at a time.
@@ -685,7 +717,22 @@ fn evaluate_views(
                         renderer.crack_tolerance(far)
                     })
                 };
-                let e = evaluate_view(&reference, &impostor, &rendered.error_px, &tol, ppd)?;
+                let mut e = evaluate_view(&reference, &impostor, &rendered.error_px, &tol, ppd)?;
+                if e.silhouette.edge_bound {
+                    // a distance at the image's edge may reach beyond it: measure the outlines
+                    // again in frames a guard band wider (the same focal length)
+                    let band = GuardBand {
+                        px: GUARD_BAND_PX,
+                        width: w,
+                        height: h,
+                    };
+                    let wide = guard_band_camera(*eye, *dir, fov_x, band)?.view();
+                    let reference = reference_renderer
+                        .render(&full, &wide, &render_options)
+                        .map_err(gpu_err("reference render"))?;
+                    let impostor = renderer.render(&wide, *eye)?.frame;
+                    e.silhouette = silhouettes_within(&reference, &impostor, band)?;
+                }
                 stats.merge(&e.error);
                 let label = format!("{label}, looking {dname}");
                 let r = e.result(&id, &label, eye.to_array(), dir.to_array());
@@ -734,4 +781,45 @@ fn evaluate_views(
         against: None,
     };
     Ok((run, against_acc))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec2;
+
+    /// The guard band's camera sees every point where the view's camera does, `px` pixels right
+    /// and down (same focal length, same centre), including points beyond the view's edges.
+    #[test]
+    fn a_guard_band_camera_shifts_pixels_by_its_band() {
+        let (eye, dir) = (DVec3::new(3.0, 1.7, -2.0), DVec3::new(0.6, -0.1, 0.8));
+        for (fov, w, h) in [(60.0, 960, 540), (90.0, 64, 48), (33.75, 1280, 720)] {
+            let band = GuardBand {
+                px: GUARD_BAND_PX,
+                width: w,
+                height: h,
+            };
+            let view = camera(eye, dir, fov, w, h).expect("camera").view();
+            let wide = guard_band_camera(eye, dir, fov, band)
+                .expect("camera")
+                .view();
+            let g = f64::from(GUARD_BAND_PX);
+            for k in 0..50 {
+                let t = f64::from(k);
+                let p = eye
+                    + 40.0 * dir
+                    + DVec3::new(13.0 * (0.7 * t).sin(), 9.0 * (1.3 * t).cos(), 5.0 * t.sin());
+                let (Some(a), Some(b)) = (view.project(p), wide.project(p)) else {
+                    continue;
+                };
+                let d = (b.pixel - a.pixel - DVec2::splat(g)).abs();
+                assert!(
+                    d.max_element() < 1e-6,
+                    "{fov}° {w}x{h}: {:?} vs {:?}",
+                    a.pixel,
+                    b.pixel
+                );
+            }
+        }
+    }
 }

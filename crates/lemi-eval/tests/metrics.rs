@@ -593,3 +593,96 @@ fn report_rejects_mismatched_worst_view() {
         .to_string();
     assert!(e.contains("32x24") && e.contains("5x5"), "{e}");
 }
+
+/// `frame` with `rect` (`[x0, y0, x1, y1)`) covered at depth 5.
+fn cover(mut frame: Frame, [x0, y0, x1, y1]: [u32; 4]) -> Frame {
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let i = (y * frame.width + x) as usize;
+            frame.depth[i] = 5.0;
+            frame.rgba[4 * i..4 * i + 4].copy_from_slice(&[200, 100, 50, 255]);
+        }
+    }
+    frame
+}
+
+/// An empty `w × h` frame.
+fn blank(w: u32, h: u32) -> Frame {
+    Frame {
+        width: w,
+        height: h,
+        rgba: vec![0; (4 * w * h) as usize],
+        depth: vec![INF; (w * h) as usize],
+    }
+}
+
+/// The `width × height` frame inside a guard band of `g` pixels.
+fn inner(frame: &Frame, g: u32, width: u32, height: u32) -> Frame {
+    let mut out = blank(width, height);
+    for y in 0..height {
+        for x in 0..width {
+            let (i, o) = (
+                ((y + g) * frame.width + x + g) as usize,
+                (y * width + x) as usize,
+            );
+            out.depth[o] = frame.depth[i];
+            out.rgba[4 * o..4 * o + 4].copy_from_slice(&frame.rgba[4 * i..4 * i + 4]);
+        }
+    }
+    out
+}
+
+/// A bar just beyond the output view's right edge in the reference, one pixel wider (into the
+/// view's last column) in the test: on frames of the view alone that column is far from everything
+/// the reference covers in the view (the distance is overstated, and `edge_bound` says so); inside
+/// frames with a guard band it is 1 px from the reference's bar, as it is.
+#[test]
+fn a_guard_band_measures_what_lies_beyond_the_image_edge() {
+    let (w, h, g) = (64u32, 48u32, 4u32);
+    let band = GuardBand {
+        px: g,
+        width: w,
+        height: h,
+    };
+    // a block in the middle of the view in both, the bar at columns w..w+2 of the view (beyond
+    // it) in the reference and w−1..w+2 in the test
+    let both = |f: Frame| cover(f, [g + 20, g + 20, g + 30, g + 40]);
+    let reference = cover(
+        both(blank(w + 2 * g, h + 2 * g)),
+        [g + w, g + 5, g + w + 2, g + 15],
+    );
+    let test = cover(
+        both(blank(w + 2 * g, h + 2 * g)),
+        [g + w - 1, g + 5, g + w + 2, g + 15],
+    );
+    let alone = silhouettes(&inner(&reference, g, w, h), &inner(&test, g, w, h)).unwrap();
+    assert!(alone.edge_bound);
+    assert!(
+        alone.displacement.max() > 20.0,
+        "{}",
+        alone.displacement.max()
+    );
+    assert_eq!(alone.false_coverage, 10);
+    let banded = silhouettes_within(&reference, &test, band).unwrap();
+    assert!(!banded.edge_bound);
+    assert_eq!(banded.displacement.max(), 1.0);
+    assert_eq!(banded.false_coverage, 10);
+    // away from the edge the band changes nothing: the same statistics as the view alone
+    let shifted = cover(
+        both(blank(w + 2 * g, h + 2 * g)),
+        [g + 40, g + 10, g + 50, g + 20],
+    );
+    let moved = cover(
+        both(blank(w + 2 * g, h + 2 * g)),
+        [g + 42, g + 11, g + 52, g + 21],
+    );
+    let a = silhouettes(&inner(&shifted, g, w, h), &inner(&moved, g, w, h)).unwrap();
+    let b = silhouettes_within(&shifted, &moved, band).unwrap();
+    assert!(!a.edge_bound && !b.edge_bound);
+    assert_eq!(a.displacement.max(), b.displacement.max());
+    assert_eq!(a.distances.max(), b.distances.max());
+    assert_eq!(a.displacement.count(), b.displacement.count());
+    assert_eq!(a.false_coverage, b.false_coverage);
+    // a view that does not fit its frame is an error
+    assert!(silhouettes_within(&inner(&shifted, g, w, h), &moved, band).is_err());
+}
