@@ -242,7 +242,7 @@ impl LayerRecorder {
                         module: &module,
                         entry_point: Some("fs_main"),
                         compilation_options: wgpu::PipelineCompilationOptions {
-                            constants: &[("TEXTURED", f64::from(u8::from(textured)))],
+                            constants: &crate::shading::material_constants(textured),
                             ..Default::default()
                         },
                         targets: &[

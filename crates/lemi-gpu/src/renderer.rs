@@ -450,7 +450,7 @@ impl GeometryPipelines {
                     module,
                     entry_point: Some(fragment),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &[("TEXTURED", f64::from(u8::from(textured)))],
+                        constants: &crate::shading::material_constants(textured),
                         ..Default::default()
                     },
                     targets: &frame_targets(view_depth),

@@ -18,6 +18,13 @@ use crate::GpuError;
 /// functions `transform_vertex`, `surface_albedo`, `shade`. Pipelines append their entry points.
 pub const SHADING_WGSL: &str = include_str!("shading.wgsl");
 
+/// The pipeline constants of [`SHADING_WGSL`] for a material with a texture of its own or without
+/// one (`TEXTURED`: without, the white texel's sample is the constant 1 and no fetch is made), for
+/// the fragment stage of every pipeline that shades geometry with it.
+pub(crate) fn material_constants(textured: bool) -> [(&'static str, f64); 1] {
+    [("TEXTURED", f64::from(u8::from(textured)))]
+}
+
 /// One directional light plus ambient, fixed and deterministic.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lighting {
