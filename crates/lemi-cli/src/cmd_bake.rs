@@ -608,7 +608,7 @@ pub fn run(args: Args) -> Result<()> {
         total.submitted_triangles as f64 / total.far_triangles.max(1) as f64
     );
     println!(
-        "bytes      per cell: raw layers {}, macro-textures {}, PNG {}; {} micro-textures in {} macro-textures",
+        "bytes      per cell: raw layers {}, macro-textures {}, PNG {}; all cells: {} micro-textures in {} macro-textures",
         human(total.raw_bytes as f64 / n),
         human(total.macro_bytes as f64 / n),
         human(total.png_bytes as f64 / n),
