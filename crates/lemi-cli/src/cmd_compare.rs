@@ -72,7 +72,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0.1)]
     pub overlap: f64,
     /// Size of the walk's frames `WIDTHxHEIGHT`.
-    #[arg(long, value_parser = crate::cmd_render::parse_size, default_value = "1280x720")]
+    #[arg(long, value_parser = lemi_core::camera::parse_size, default_value = "1280x720")]
     pub walk_size: (u32, u32),
     /// Frames per second of the generated path.
     #[arg(long, default_value_t = 30.0)]
@@ -93,7 +93,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     pub eval_cells: Vec<CellId>,
     /// Evaluation image size (default: the bake's output view).
-    #[arg(long, value_parser = crate::cmd_render::parse_size)]
+    #[arg(long, value_parser = lemi_core::camera::parse_size)]
     pub eval_size: Option<(u32, u32)>,
     /// Also bake the `lemi` strategy with these texture formats (comma-separated: png, bc7, bc1;
     /// the strategies are baked with the bake's default, bc1) and report each one's disk bytes,

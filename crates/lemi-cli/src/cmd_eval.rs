@@ -31,7 +31,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output size `WIDTHxHEIGHT`; default: the bake's output width at 16:9.
-    #[arg(long, value_parser = crate::cmd_render::parse_size)]
+    #[arg(long, value_parser = lemi_core::camera::parse_size)]
     pub size: Option<(u32, u32)>,
     /// Horizontal field of view in degrees; default: the bake's.
     #[arg(long)]

@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long, default_value_t = 60.0)]
     pub fov: f64,
     /// Image size `WIDTHxHEIGHT`.
-    #[arg(long, value_parser = parse_size, default_value = "1280x720")]
+    #[arg(long, value_parser = lemi_core::camera::parse_size, default_value = "1280x720")]
     pub size: (u32, u32),
     /// Near-plane distance in metres (the far plane is at infinity).
     #[arg(long, default_value_t = lemi_core::camera::DEFAULT_NEAR)]
@@ -110,22 +110,6 @@ fn parse_numbers(s: &str, n: usize) -> Result<Vec<f64>, String> {
 pub(crate) fn parse_vec3(s: &str) -> Result<DVec3, String> {
     let v = parse_numbers(s, 3)?;
     Ok(DVec3::new(v[0], v[1], v[2]))
-}
-
-/// `WIDTHxHEIGHT` (each 1..=16384), for every command's `--size`.
-pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
-    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|e| format!("`{s}`: height: {e}"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("`{s}`: width and height must be 1..=16384"));
-    }
-    Ok((w, h))
 }
 
 fn parse_rgba(s: &str) -> Result<[u8; 4], String> {

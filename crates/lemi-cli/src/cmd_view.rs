@@ -45,7 +45,7 @@ pub struct Args {
     /// The bundle directory.
     pub bundle: PathBuf,
     /// Window size `WIDTHxHEIGHT` (physical pixels).
-    #[arg(long, value_parser = crate::cmd_render::parse_size, default_value = "960x540")]
+    #[arg(long, value_parser = lemi_core::camera::parse_size, default_value = "960x540")]
     pub size: (u32, u32),
     /// Render at this fraction of the window's pixels (the image is stretched to the window);
     /// below 1 for speed on a software rasterizer.

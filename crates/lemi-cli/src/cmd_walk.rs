@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, value_name = "PATH.json")]
     pub path: Option<PathBuf>,
     /// Output size `WIDTHxHEIGHT`.
-    #[arg(long, value_parser = crate::cmd_render::parse_size, default_value = "1280x720")]
+    #[arg(long, value_parser = lemi_core::camera::parse_size, default_value = "1280x720")]
     pub size: (u32, u32),
     /// Horizontal field of view in degrees; default: the bake's output view (60° without one).
     #[arg(long)]

@@ -384,9 +384,36 @@ impl View {
     }
 }
 
+/// An image size `WIDTHxHEIGHT` (each 1..=16384), for every command's and example's `--size`.
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 1280x720"))?;
+    let w: u32 = w.trim().parse().map_err(|e| format!("`{s}`: width: {e}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|e| format!("`{s}`: height: {e}"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("`{s}`: width and height must be 1..=16384"));
+    }
+    Ok((w, h))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sizes_parse_and_absurd_ones_are_errors() {
+        assert_eq!(parse_size("1280x720"), Ok((1280, 720)));
+        assert_eq!(parse_size(" 64 X 36 "), Ok((64, 36)));
+        for bad in ["1280", "0x720", "1280x0", "99999x10", "axb", "12x-3", ""] {
+            let e = parse_size(bad).unwrap_err();
+            assert!(e.contains(&format!("`{bad}`")), "{bad}: {e}");
+        }
+    }
+
     use proptest::prelude::*;
 
     fn close(a: f64, b: f64, tol: f64) -> bool {

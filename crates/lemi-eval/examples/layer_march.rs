@@ -22,6 +22,7 @@ mod common;
 use anyhow::{anyhow, Context, Result};
 use common::CellRenderers;
 use glam::DVec3;
+use lemi_core::camera::parse_size;
 use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, EvalOptions};
 use lemi_gpu::{BackendChoice, Gpu, RenderOptions};
@@ -61,8 +62,7 @@ fn main() -> Result<()> {
     let mut eval = EvalOptions::default();
     if let Some(i) = args.iter().position(|a| a == "--size") {
         let v = args.get(i + 1).context("--size WxH")?;
-        let (w, h) = v.split_once('x').context("--size WxH")?;
-        eval.size = Some((w.parse()?, h.parse()?));
+        eval.size = Some(parse_size(v).map_err(|e| anyhow!("--size {e}"))?);
     }
     let opened = lemi_scene::open_bundle(std::path::Path::new(&args[0]), &[], None)?;
     let (bundle, scene) = (opened.bundle, opened.scene);

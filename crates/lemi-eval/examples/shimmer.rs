@@ -31,6 +31,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::{DQuat, DVec3};
+use lemi_core::camera::parse_size;
 use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, EvalOptions};
 use lemi_gpu::{BackendChoice, Frame, Gpu, RenderOptions, TexelFilter};
@@ -213,10 +214,7 @@ fn main() -> Result<()> {
             "--frames" => frames = v.parse().context("--frames")?,
             "--step-px" => step_px = v.parse().context("--step-px")?,
             "--k" => k = v.parse().context("--k")?,
-            "--size" => {
-                let (w, h) = v.split_once('x').context("--size WxH")?;
-                eval.size = Some((w.parse().context("--size")?, h.parse().context("--size")?));
-            }
+            "--size" => eval.size = Some(parse_size(v).map_err(|e| anyhow!("--size {e}"))?),
             f => bail!("unknown flag {f}"),
         }
         i += 2;

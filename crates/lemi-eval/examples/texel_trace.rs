@@ -15,6 +15,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use glam::DVec3;
+use lemi_core::camera::parse_size;
 use lemi_core::cell::CellId;
 use lemi_eval::{camera, output_view, EvalOptions};
 
@@ -38,10 +39,7 @@ fn main() -> Result<()> {
                 let (x, y) = v.split_once(',').context("--pixel x,y")?;
                 pixel = Some((x.parse::<f64>()?, y.parse::<f64>()?));
             }
-            "--size" => {
-                let (w, h) = v.split_once('x').context("--size WxH")?;
-                eval.size = Some((w.parse()?, h.parse()?));
-            }
+            "--size" => eval.size = Some(parse_size(v).map_err(|e| anyhow!("--size {e}"))?),
             "--around" => around = v.parse().context("--around")?,
             f => bail!("unknown flag {f}"),
         }

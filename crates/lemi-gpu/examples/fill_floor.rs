@@ -35,8 +35,7 @@ fn main() -> Result<(), Error> {
         match a.as_str() {
             "--size" => {
                 let v = args.next().ok_or("--size needs WxH")?;
-                let (w, h) = v.split_once('x').ok_or("--size needs WxH")?;
-                (width, height) = (w.parse()?, h.parse()?);
+                (width, height) = lemi_core::camera::parse_size(&v)?;
             }
             "--reps" => reps = args.next().ok_or("--reps needs N")?.parse()?,
             "--texel-filter" => {

@@ -109,10 +109,8 @@ fn parse_args() -> Result<Args, Error> {
             "--cells" => a.cells = Some(value()?.parse()?),
             "--fov" => a.fov_x = value()?.parse()?,
             "--size" => {
-                let v = value()?;
-                let (w, h) = v.split_once('x').ok_or("--size wants WxH")?;
-                a.width = w.parse()?;
-                a.height = h.parse()?;
+                (a.width, a.height) =
+                    lemi_core::camera::parse_size(&value()?).map_err(|e| format!("--size {e}"))?;
             }
             "--save" => a.save = Some(value()?.into()),
             "--check" => a.check = Some(value()?.into()),
