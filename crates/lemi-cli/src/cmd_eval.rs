@@ -252,11 +252,13 @@ pub fn run(args: Args) -> Result<()> {
             println!("split      {split}");
         }
         println!(
-            "silhouette max {:.2} px, worst view p99 {:.2} px, mean {:.3} px; coverage displacement max {:.2} px, worst view p99 {:.2} px; false coverage {} pixels ({:.3} %)",
+            "silhouette max {:.2} px, p99 {:.2} px (worst view {:.2} px), mean {:.3} px; coverage displacement max {:.2} px, p99 {:.2} px (worst view {:.2} px); false coverage {} pixels ({:.3} %)",
             s.silhouette_max_px,
+            s.silhouette_pooled_p99_px,
             s.silhouette_p99_px,
             s.silhouette_mean_px,
             s.displacement_max_px,
+            s.displacement_pooled_p99_px,
             s.displacement_p99_px,
             s.false_coverage_pixels,
             100.0 * s.false_coverage

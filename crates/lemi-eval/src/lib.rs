@@ -32,7 +32,7 @@ pub use image_metrics::{
 pub use lemi_gpu::Frame;
 pub use report::{
     severity_cmp, verdict, write_report, Aggregate, BundleResult, CellResult, ErrorSummary,
-    ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
+    OutlineStats, ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
 pub use run::{
     camera, evaluate_bundle, evaluate_bundle_against, evaluate_with, output_view, AgainstResult,

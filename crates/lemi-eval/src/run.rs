@@ -22,7 +22,7 @@ use lemi_gpu::{
     RenderOptions, Renderer, UploadOptions,
 };
 
-use crate::report::{BundleResult, CellResult, WorstSet, WorstView};
+use crate::report::{BundleResult, CellResult, OutlineStats, WorstSet, WorstView};
 use crate::{
     evaluate_view, ppd_for_view, silhouettes_within, EvalError, GuardBand, PixelErrorStats,
     WORST_PER_BUNDLE,
@@ -680,6 +680,7 @@ fn evaluate_views(
         let mut stats = PixelErrorStats::new();
         let mut own = PixelErrorStats::new();
         let mut gap = PixelErrorStats::new();
+        let mut outlines = OutlineStats::default();
         let mut views = Vec::new();
         for (label, eye, directions) in points {
             for (dname, dir) in directions {
@@ -734,6 +735,8 @@ fn evaluate_views(
                     e.silhouette = silhouettes_within(&reference, &impostor, band)?;
                 }
                 stats.merge(&e.error);
+                outlines.silhouette.merge(&e.silhouette.distances);
+                outlines.displacement.merge(&e.silhouette.displacement);
                 let label = format!("{label}, looking {dname}");
                 let r = e.result(&id, &label, eye.to_array(), dir.to_array());
                 worst.offer(&r, || WorstView {
@@ -750,7 +753,7 @@ fn evaluate_views(
             own,
             gap,
         });
-        cells.push(CellResult::new(id, views, stats));
+        cells.push(CellResult::new(id, views, stats).with_outline_stats(outlines));
     }
     let mut own = PixelErrorStats::new();
     let mut gap = PixelErrorStats::new();

@@ -686,3 +686,56 @@ fn a_guard_band_measures_what_lies_beyond_the_image_edge() {
     // a view that does not fit its frame is an error
     assert!(silhouettes_within(&inner(&shifted, g, w, h), &moved, band).is_err());
 }
+
+/// The pooled p99 of the outlines is that of all silhouette pixels of all views together, which a
+/// view whose few far outline pixels set its own p99 does not set: one view of 200 pixels at
+/// 0.5 px, one of 99 at 0.5 px and 2 at 3 px (its p99: 3 px; pooled, 2 of 301 pixels: 0.5 px).
+#[test]
+fn pooled_outline_p99_is_over_all_silhouette_pixels_of_all_views() {
+    let view_of = |values: &[f32]| {
+        let s = PixelErrorStats::from_values(values);
+        let view = ViewResult {
+            cell: "c".into(),
+            viewpoint: "v".into(),
+            eye: [0.0; 3],
+            dir: [0.0, 0.0, -1.0],
+            error: ErrorSummary::default(),
+            crack_pixels: 0,
+            mean_flip: 0.0,
+            psnr: f64::INFINITY,
+            ssim: 1.0,
+            coverage: 1.0,
+            silhouette: ErrorSummary::of(&s),
+            displacement: ErrorSummary::of(&s),
+            false_coverage_pixels: 0,
+            pixels: 1,
+        };
+        (view, s)
+    };
+    let (a, sa) = view_of(&[0.5; 200]);
+    let mut far = vec![0.5f32; 99];
+    far.extend([3.0, 3.0]);
+    let (b, sb) = view_of(&far);
+    assert_eq!(b.silhouette.p99, 3.0);
+    let mut outlines = OutlineStats::default();
+    for s in [&sa, &sb] {
+        outlines.silhouette.merge(s);
+        outlines.displacement.merge(s);
+    }
+    let cell =
+        CellResult::new("c", vec![a, b], PixelErrorStats::new()).with_outline_stats(outlines);
+    let bundle = BundleResult::new(vec![cell]);
+    for s in [&bundle.cells[0].summary, &bundle.summary] {
+        assert_eq!(s.silhouette_p99_px, 3.0, "the worst view's p99");
+        assert!((s.silhouette_pooled_p99_px - 0.5).abs() <= 1.0 / 320.0 + 1e-6);
+        assert!((s.displacement_pooled_p99_px - 0.5).abs() <= 1.0 / 320.0 + 1e-6);
+        assert_eq!(s.silhouette_max_px, 3.0);
+    }
+    // without the per-pixel statistics (an older report), the pooled values stay 0
+    let plain = BundleResult::new(vec![CellResult::new(
+        "c",
+        vec![view_of(&far).0],
+        PixelErrorStats::new(),
+    )]);
+    assert_eq!(plain.summary.silhouette_pooled_p99_px, 0.0);
+}

@@ -160,6 +160,14 @@ pub struct Aggregate {
     /// The largest per-view p99 of the coverage displacement (px).
     #[serde(default, with = "f32_or_inf")]
     pub displacement_p99_px: f32,
+    /// The p99 of the silhouette distances of all views pooled (px): all silhouette pixels of
+    /// the cell or bundle are within it but for 1 %. 0 where the evaluation did not keep the
+    /// distances ([`CellResult::with_outline_stats`]).
+    #[serde(default, with = "f32_or_inf")]
+    pub silhouette_pooled_p99_px: f32,
+    /// The p99 of the coverage displacement of all views pooled (px).
+    #[serde(default, with = "f32_or_inf")]
+    pub displacement_pooled_p99_px: f32,
     /// Pixels the impostor covers where the reference shows background, over all views.
     #[serde(default)]
     pub false_coverage_pixels: u64,
@@ -196,6 +204,8 @@ impl Aggregate {
             silhouette_mean_px: 0.0,
             displacement_max_px: 0.0,
             displacement_p99_px: 0.0,
+            silhouette_pooled_p99_px: 0.0,
+            displacement_pooled_p99_px: 0.0,
             false_coverage_pixels: 0,
             false_coverage: 0.0,
         };
@@ -237,6 +247,28 @@ impl Aggregate {
         }
         a
     }
+
+    /// Sets the pooled p99s from the merged outline statistics.
+    fn set_pooled(&mut self, o: &OutlineStats) {
+        self.silhouette_pooled_p99_px = o.silhouette.p99();
+        self.displacement_pooled_p99_px = o.displacement.p99();
+    }
+}
+
+/// The merged per-pixel outline statistics of a cell or bundle: the silhouette distances and the
+/// coverage displacement of all its views ([`crate::SilhouetteStats`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct OutlineStats {
+    pub silhouette: PixelErrorStats,
+    pub displacement: PixelErrorStats,
+}
+
+impl OutlineStats {
+    /// Adds another set (exactly, see [`PixelErrorStats::merge`]).
+    pub fn merge(&mut self, other: &OutlineStats) {
+        self.silhouette.merge(&other.silhouette);
+        self.displacement.merge(&other.displacement);
+    }
 }
 
 /// The results of one view cell.
@@ -252,6 +284,9 @@ pub struct CellResult {
     /// The merged pixel-error statistics (not serialised: the JSON has the summary and histogram).
     #[serde(skip)]
     stats: PixelErrorStats,
+    /// The merged outline statistics (not serialised: the JSON has their pooled p99s).
+    #[serde(skip)]
+    outlines: OutlineStats,
 }
 
 impl CellResult {
@@ -267,7 +302,16 @@ impl CellResult {
             worst_views: worst_of(view_results.iter(), WORST_PER_CELL),
             view_results,
             stats,
+            outlines: OutlineStats::default(),
         }
+    }
+
+    /// The same with the merged outline statistics of its views, whose pooled p99s the summary
+    /// then reports.
+    pub fn with_outline_stats(mut self, outlines: OutlineStats) -> CellResult {
+        self.summary.set_pooled(&outlines);
+        self.outlines = outlines;
+        self
     }
 
     /// The merged pixel-error statistics of the cell (empty after deserialisation).
@@ -295,12 +339,16 @@ impl BundleResult {
     /// The bundle's results from its cells (their statistics are merged).
     pub fn new(cells: Vec<CellResult>) -> BundleResult {
         let mut stats = PixelErrorStats::new();
+        let mut outlines = OutlineStats::default();
         for c in &cells {
             stats.merge(&c.stats);
+            outlines.merge(&c.outlines);
         }
         let views = || cells.iter().flat_map(|c| c.view_results.iter());
+        let mut summary = Aggregate::of(views(), &stats);
+        summary.set_pooled(&outlines);
         BundleResult {
-            summary: Aggregate::of(views(), &stats),
+            summary,
             worst_views: worst_of(views(), WORST_PER_BUNDLE),
             cells,
             info: BTreeMap::new(),
