@@ -807,6 +807,18 @@ fn eval_certificate_gates_and_bad_input() {
             && v["false_coverage_pixels"].is_number(),
         "{v}"
     );
+    // the p99 of all views' outline pixels pooled is never above the worst single view's (this
+    // small bake's outlines lie pixels apart, so both are above 0)
+    for (pooled, worst) in [
+        ("silhouette_pooled_p99_px", "silhouette_p99_px"),
+        ("displacement_pooled_p99_px", "displacement_p99_px"),
+    ] {
+        let (p, w) = (v[pooled].as_f64(), v[worst].as_f64());
+        assert!(
+            matches!((p, w), (Some(p), Some(w)) if p > 0.0 && p <= w),
+            "{pooled} {p:?} against {worst} {w:?}: {v}"
+        );
+    }
     // bad input
     assert_clean_error(&lemi(&["eval", "/nonexistent/bundle"]), "manifest.json");
     assert_clean_error(&lemi(&["eval", b, "--cells", "9_0_0"]), "9_0_0");
