@@ -70,6 +70,7 @@ impl ViewEval {
             dir,
             error: ErrorSummary::of(&self.error),
             crack_pixels: self.cracks.count,
+            crack_samples: self.cracks.first.iter().map(|&(x, y)| [x, y]).collect(),
             mean_flip: self.flip.mean,
             psnr: self.psnr,
             ssim: self.ssim,

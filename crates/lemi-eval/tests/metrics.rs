@@ -451,6 +451,10 @@ fn aggregation_per_cell_and_bundle() {
     assert_eq!(b.cells[0].summary.views, 3);
     assert_eq!(b.summary.crack_pixels, 6);
     assert_eq!(b.summary.views_with_cracks, 6);
+    // the one crack pixel of every view (depth 33 of a 32-wide frame: x 1, y 1), where it is
+    for v in b.cells.iter().flat_map(|c| &c.view_results) {
+        assert_eq!(v.crack_samples, vec![[1, 1]], "{}", v.viewpoint);
+    }
     // max error: 96 * 0.01 * 3.
     assert!((b.summary.max_error_px - 2.88).abs() < 1e-5);
     assert_eq!(b.summary.max_error_px, b.cells[1].summary.max_error_px);
@@ -484,6 +488,7 @@ fn verdict_format() {
         dir: [0.0, 0.0, -1.0],
         error: ErrorSummary::of(&stats),
         crack_pixels: 0,
+        crack_samples: Vec::new(),
         mean_flip: 0.031,
         psnr: f64::INFINITY,
         ssim: 1.0,
@@ -505,6 +510,8 @@ fn verdict_format() {
     assert_eq!(back.summary.psnr, f64::INFINITY);
     assert_eq!(back.cells[0].view_results[0], b.cells[0].view_results[0]);
     assert_eq!(back.summary, b.summary);
+    // a view without cracks has no crack samples in its JSON
+    assert!(!json.contains("crack_samples"), "{json}");
 }
 
 #[test]
@@ -577,6 +584,9 @@ fn report_is_written_local_and_complete() {
     assert_eq!(json["views"], 6);
     assert_eq!(json["crack_pixels"], 6);
     assert_eq!(json["info"]["bundle"], "city.lemi");
+    // every view says where its crack pixel is
+    let v = &cells[0]["view_results"][0];
+    assert_eq!(v["crack_samples"], serde_json::json!([[1, 1]]), "{v}");
     // Writing again replaces atomically.
     write_report(&out, &b, &[]).unwrap();
 }
@@ -701,6 +711,7 @@ fn pooled_outline_p99_is_over_all_silhouette_pixels_of_all_views() {
             dir: [0.0, 0.0, -1.0],
             error: ErrorSummary::default(),
             crack_pixels: 0,
+            crack_samples: Vec::new(),
             mean_flip: 0.0,
             psnr: f64::INFINITY,
             ssim: 1.0,

@@ -87,7 +87,7 @@ fn views_table(views: &[ViewResult]) -> Markup {
                     td { (fmt_num(v.error.max as f64, 3)) }
                     td { (fmt_num(v.error.p99 as f64, 3)) }
                     td { (fmt_num(v.error.mean, 3)) }
-                    td { (v.crack_pixels) }
+                    td { (v.crack_pixels) (crack_places(v)) }
                     td { (fmt_num(v.mean_flip as f64, 4)) }
                     td { (fmt_num(v.psnr, 2)) }
                     td { (fmt_num(v.ssim, 4)) }
@@ -96,6 +96,22 @@ fn views_table(views: &[ViewResult]) -> Markup {
             }
         }
     }
+}
+
+/// Where a view's first crack pixels are, e.g. ` at (576, 353), (576, 354), …`; empty without.
+fn crack_places(v: &ViewResult) -> String {
+    const SHOWN: usize = 3;
+    if v.crack_samples.is_empty() {
+        return String::new();
+    }
+    let places: Vec<String> = v
+        .crack_samples
+        .iter()
+        .take(SHOWN)
+        .map(|[x, y]| format!("({x}, {y})"))
+        .collect();
+    let more = v.crack_pixels > places.len() as u64;
+    format!(" at {}{}", places.join(", "), if more { ", …" } else { "" })
 }
 
 /// An SVG bar chart of `h`, `width × height` pixels, drawn with `plotters`: counts on a log axis,

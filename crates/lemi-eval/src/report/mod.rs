@@ -70,6 +70,11 @@ pub struct ViewResult {
     pub dir: [f64; 3],
     pub error: ErrorSummary,
     pub crack_pixels: u64,
+    /// Where the first crack pixels are, `[x, y]` from the top left, row-major, up to
+    /// [`crate::MAX_CRACK_SAMPLES`] of them: the pixels `lemi render BUNDLE --compare` marks red
+    /// from the same eye and direction. Omitted from the JSON where there are none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub crack_samples: Vec<[u32; 2]>,
     pub mean_flip: f32,
     /// dB over RGB; `+∞` (JSON `null`) for identical images.
     #[serde(with = "f64_or_inf")]
@@ -597,6 +602,7 @@ mod tests {
                 above_1px: 0.0,
             },
             crack_pixels: cracks,
+            crack_samples: Vec::new(),
             mean_flip: flip,
             psnr: 30.0,
             ssim: 0.9,
