@@ -54,6 +54,7 @@ try {
   const state = await page.evaluate(() => ({
     error: window.lemi.error, renderer: window.lemi.renderer, cell: window.lemi.shownCell,
     texture_formats: window.lemi.textureFormats,
+    fetched_bytes: window.lemi.fetchedBytes, transferred_bytes: window.lemi.transferredBytes,
   }));
   Object.assign(out, state);
   if (state.error) throw new Error(`the viewer failed: ${state.error}`);
@@ -72,6 +73,7 @@ try {
       cells: window.lemi.loadedCells,
       stalls: window.lemi.stalls,
       fetched: window.lemi.fetchedBytes,
+      transferred: window.lemi.transferredBytes,
     }), start);
     const t = r.times.slice().sort((a, b) => a - b);
     const sum = r.times.reduce((a, b) => a + b, 0);
@@ -86,6 +88,7 @@ try {
       loaded_cells: r.cells.length,
       stalled_frames: r.stalls,
       fetched_bytes: r.fetched,
+      transferred_bytes: r.transferred,
     };
   }
   out.ok = true;

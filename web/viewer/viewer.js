@@ -48,12 +48,31 @@ if (params.get('transparent') === '1') {
   document.documentElement.style.background = 'transparent';
   document.body.style.background = 'transparent';
 }
+// keep a resource timing entry for every cell a long walk fetches
+if (performance.setResourceTimingBufferSize) performance.setResourceTimingBufferSize(100000);
+const fetchedUrls = new Set();
+
 const status = {
   ready: false, error: null, frames: 0, frameTimes: [], currentCell: null, shownCell: null,
   loadedCells: [], fetchedBytes: 0, residentBytes: 0, stalls: 0,
   // the formats the macro-textures were uploaded in: RGBA8 (PNG), BC1 or BC7 (KTX2 blocks)
   textureFormats: [],
 };
+// the cells' bytes as they came over the network (gzip-encoded by `lemi serve`), from the
+// browser's resource timing (fetchedBytes counts them decoded); read when asked, since an entry
+// may be filed a moment after its body was read
+Object.defineProperty(status, 'transferredBytes', {
+  enumerable: true,
+  get() {
+    let sum = 0;
+    for (const url of fetchedUrls) {
+      const entries = performance.getEntriesByName(url);
+      const last = entries[entries.length - 1];
+      sum += last && last.encodedBodySize ? last.encodedBodySize : 0;
+    }
+    return sum;
+  },
+});
 window.lemi = status;
 
 function numbers(name, n) {
@@ -482,6 +501,7 @@ async function main() {
       const buffer = await response.arrayBuffer();
       cell.bytes = buffer.byteLength;
       status.fetchedBytes += buffer.byteLength;
+      fetchedUrls.add(response.url);
       const gltf = await loader.parseAsync(buffer, '');
       Object.assign(cell, cellGroup(gltf));
       cell.group.visible = false;
@@ -679,7 +699,7 @@ async function main() {
         `cell     ${hereId || 'outside the grid'}${shown && hereId !== status.shownCell ? ` (showing ${status.shownCell}, loading)` : ''}`,
         `eye      ${eye.map((v) => v.toFixed(2)).join(', ')}`,
         `loaded   ${status.loadedCells.length} cells: ${status.loadedCells.join(' ')}`,
-        `bytes    ${(status.residentBytes / 1e6).toFixed(2)} MB resident, ${(status.fetchedBytes / 1e6).toFixed(2)} MB fetched`,
+        `bytes    ${(status.residentBytes / 1e6).toFixed(2)} MB resident, ${(status.fetchedBytes / 1e6).toFixed(2)} MB fetched (${(status.transferredBytes / 1e6).toFixed(2)} MB sent)`,
         shown && shown.info ? `quads    ${shown.info.quads}, near triangles ${shown.info.near_triangles}, layers ${shown.info.layer_count.join('/')}` : '',
         `keys     WASD QE move, drag/click to look, F ${walking ? 'walk (on)' : 'fly'}, L layers${tint ? ' (on)' : ''}, N near${showNear ? '' : ' (off)'}, H HUD`,
       ].join('\n');

@@ -231,6 +231,15 @@ fn the_browser_shows_what_lemi_renders() {
         let reference = d.join(format!("{name}-lemi.png"));
         render(&bundle, eye, dir, fov_y, (w, h), &reference);
         assert_eq!(v["texture_formats"], serde_json::json!(["RGBA8"]), "{v}");
+        // lemi serve sends the cells gzip-encoded and the browser decodes them
+        let (fetched, sent) = (
+            v["fetched_bytes"].as_f64().unwrap_or(0.0),
+            v["transferred_bytes"].as_f64().unwrap_or(0.0),
+        );
+        assert!(
+            sent > 0.0 && sent < fetched,
+            "{name}: {sent} bytes sent for {fetched} fetched"
+        );
         let t = frame(&shot);
         let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
         eprintln!("{name}: {note} ({})", v["renderer"]);
