@@ -1634,7 +1634,7 @@ fn gap_filled_texels_are_displayed_within_alpha() {
                 let (mut worst, mut copied) = (0.0f64, 0usize);
                 for (k, writes) in gap.writes.iter().enumerate() {
                     for &(i, _) in writes {
-                        let d = depth[k][i] as f64;
+                        let d = depth[k].get(i).unwrap_or(f32::NAN) as f64;
                         if !d.is_finite() {
                             // the innermost layer's near-field seam texels (near geometry's
                             // colour, `close_near_seam`) are opaque border texels without a

@@ -562,13 +562,16 @@ fn record_depths_matches_the_bake_for_every_layering() {
             assert!(depths.depth[slot]
                 .iter()
                 .all(|d| d.len() == (RES * RES) as usize));
+            // stored in tiles: never more than the layers whole
+            let stored: usize = depths.depth[slot].iter().map(|d| d.stored_bytes()).sum();
+            assert!(stored <= layers.len() * (RES * RES) as usize * 4);
         }
         // the same texels as the bake recorded (same slabs, same coverage)
         let finite: u64 = depths
             .depth
             .iter()
             .flatten()
-            .map(|d| d.iter().filter(|x| x.is_finite()).count() as u64)
+            .map(|d| d.finite_count() as u64)
             .sum();
         assert_eq!(finite, h.stats.opaque_texels_recorded, "{name}");
         let texels = baked_texels(&baked, &h.faces);
@@ -600,14 +603,14 @@ fn record_depths_matches_the_bake_for_every_layering() {
                 let innermost = k + 1 == h.layers[slot].len();
                 for &t in layer {
                     total += 1;
-                    let d = depths.depth[slot][k][t] as f64;
+                    let d = depths.depth[slot][k].get(t).unwrap_or(f32::NAN) as f64;
                     if d.is_finite() {
                         covered += 1;
                         if d >= lo && d <= hi {
                             in_range += 1;
                         }
                     } else if !innermost {
-                        let closer = depths.depth[slot][k + 1][t];
+                        let closer = depths.depth[slot][k + 1].get(t).unwrap_or(f32::NAN);
                         if !closer.is_finite() && k + 2 != h.layers[slot].len() {
                             unexplained += 1;
                         }

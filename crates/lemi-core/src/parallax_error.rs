@@ -41,12 +41,141 @@ pub struct LayerDepths {
     pub faces: Vec<Face>,
     /// Per face (same order as `faces`), the layer distances far to near.
     pub distances: Vec<Vec<f64>>,
-    /// Per face, per layer (far to near), `res · res` depths, row-major, row 0 at the top.
-    pub depth: Vec<Vec<Vec<f32>>>,
+    /// Per face, per layer (far to near), the `res · res` texels' depths (row-major, row 0 at
+    /// the top), stored in tiles where the layer recorded something.
+    pub depth: Vec<Vec<TexelDepths>>,
     /// An object impostor's frame ([`crate::object_cell`]): the faces, distances and depths are
     /// then those of its canonical frame (reference viewpoint at the canonical origin, `center`
     /// unused), and world points are mapped by it.
     pub frame: Option<crate::object_cell::ObjectFrame>,
+}
+
+/// One layer's per-texel depths, `f32::INFINITY` where nothing was recorded, kept in tiles of
+/// [`TexelDepths::TILE`]² texels of which only those holding a recorded depth are stored: a
+/// certificate holds every layer of a cell at once, which stored whole would take
+/// `faces · layers · res² · 4` bytes (4.3 GB for 4 faces of 64 layers at 2048², 17 GB at 4096²),
+/// while a slab's content touches a fraction of its face.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TexelDepths {
+    res: u32,
+    /// Row-major over `⌈res / TILE⌉²` tiles; a stored tile holds `TILE²` depths, row-major
+    /// (texels past the layer's edge infinite).
+    tiles: Vec<Option<Box<[f32]>>>,
+}
+
+impl TexelDepths {
+    /// Side of a tile in texels.
+    pub const TILE: u32 = 64;
+
+    fn tiles_per_side(res: u32) -> usize {
+        res.div_ceil(Self::TILE) as usize
+    }
+
+    /// Nothing recorded in a `res²` layer.
+    pub fn empty(res: u32) -> Self {
+        let n = Self::tiles_per_side(res);
+        Self {
+            res,
+            tiles: vec![None; n * n],
+        }
+    }
+
+    /// Every texel of a `res²` layer at depth `d`.
+    pub fn filled(res: u32, d: f32) -> Self {
+        let mut out = Self::empty(res);
+        for idx in 0..out.len() {
+            out.set(idx, d);
+        }
+        out
+    }
+
+    /// The depths of a `res²` layer given row-major (`res · res` values; missing ones infinite).
+    pub fn from_dense(res: u32, depth: &[f32]) -> Self {
+        let mut out = Self::empty(res);
+        let (t, r, n) = (Self::TILE as usize, res as usize, Self::tiles_per_side(res));
+        for ty in 0..n {
+            for tx in 0..n {
+                let (x0, x1) = (tx * t, ((tx + 1) * t).min(r));
+                let rows = ty * t..((ty + 1) * t).min(r);
+                let row = |y: usize| depth.get(y * r + x0..y * r + x1).unwrap_or(&[]);
+                if !rows.clone().any(|y| row(y).iter().any(|d| d.is_finite())) {
+                    continue;
+                }
+                let mut tile = vec![f32::INFINITY; t * t].into_boxed_slice();
+                for y in rows {
+                    let src = row(y);
+                    let dst = (y - ty * t) * t;
+                    tile[dst..dst + src.len()].copy_from_slice(src);
+                }
+                out.tiles[ty * n + tx] = Some(tile);
+            }
+        }
+        out
+    }
+
+    /// `res · res`, the texels of the layer.
+    pub fn len(&self) -> usize {
+        self.res as usize * self.res as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Where texel `idx` (row-major) lies: its tile and its place in the tile.
+    fn locate(&self, idx: usize) -> Option<(usize, usize)> {
+        if idx >= self.len() {
+            return None;
+        }
+        let (r, t) = (self.res as usize, Self::TILE as usize);
+        let (i, j) = (idx % r, idx / r);
+        Some((
+            (j / t) * Self::tiles_per_side(self.res) + i / t,
+            (j % t) * t + i % t,
+        ))
+    }
+
+    /// The depth of texel `idx` (row-major, `j · res + i`); `None` outside the layer,
+    /// `f32::INFINITY` where nothing was recorded.
+    pub fn get(&self, idx: usize) -> Option<f32> {
+        let (tile, k) = self.locate(idx)?;
+        Some(match &self.tiles[tile] {
+            Some(d) => d[k],
+            None => f32::INFINITY,
+        })
+    }
+
+    /// Sets texel `idx` (row-major); ignored outside the layer.
+    pub fn set(&mut self, idx: usize, d: f32) {
+        let Some((tile, k)) = self.locate(idx) else {
+            return;
+        };
+        let t = Self::TILE as usize;
+        match &mut self.tiles[tile] {
+            Some(tile) => tile[k] = d,
+            None if d.is_finite() => {
+                let mut new = vec![f32::INFINITY; t * t].into_boxed_slice();
+                new[k] = d;
+                self.tiles[tile] = Some(new);
+            }
+            None => {}
+        }
+    }
+
+    /// How many texels recorded a depth.
+    pub fn finite_count(&self) -> usize {
+        self.tiles
+            .iter()
+            .flatten()
+            .map(|t| t.iter().filter(|d| d.is_finite()).count())
+            .sum()
+    }
+
+    /// The bytes the stored tiles take.
+    pub fn stored_bytes(&self) -> usize {
+        let t = Self::TILE as usize;
+        self.tiles.iter().flatten().count() * t * t * std::mem::size_of::<f32>()
+    }
 }
 
 /// Which layer texel a world point on a layer plane belongs to.
@@ -139,7 +268,7 @@ impl LayerDepths {
                 && (0..res).contains(&j)
                 && depths
                     .get((j * res + i) as usize)
-                    .is_some_and(|d| d.is_finite())
+                    .is_some_and(f32::is_finite)
         };
         if has_depth(t.i as i64, t.j as i64) || rim <= 0.0 {
             return *t;
@@ -181,7 +310,7 @@ impl LayerDepths {
             .enumerate()
             .filter_map(|(k, l)| l.get(idx).map(|d| (k, d)))
             .find(|(_, d)| d.is_finite())
-            .map(|(k, &d)| (d as f64, k > 0))
+            .map(|(k, d)| (d as f64, k > 0))
     }
 }
 
@@ -278,6 +407,58 @@ pub fn pixel_errors(
 mod tests {
     use super::*;
     use crate::camera::Camera;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The tiled depths read back exactly what a dense layer holds, store only tiles with a
+        /// recorded depth, and take writes.
+        #[test]
+        fn texel_depths_equal_the_dense_layer(
+            res in 1u32..200,
+            spots in proptest::collection::vec((0usize..40_000, 0.5f32..1e4), 0..40),
+            writes in proptest::collection::vec((0usize..40_000, prop_oneof![Just(f32::INFINITY), 1.0f32..100.0]), 0..20),
+        ) {
+            let n = (res * res) as usize;
+            let mut dense = vec![f32::INFINITY; n];
+            for &(k, d) in &spots {
+                dense[k % n] = d;
+            }
+            let mut sparse = TexelDepths::from_dense(res, &dense);
+            prop_assert_eq!(sparse.len(), n);
+            for (k, &d) in dense.iter().enumerate() {
+                prop_assert_eq!(sparse.get(k), Some(d));
+            }
+            prop_assert_eq!(sparse.get(n), None);
+            prop_assert_eq!(sparse.finite_count(), dense.iter().filter(|d| d.is_finite()).count());
+            // at most one tile per recorded texel, none for an empty layer
+            let t = (TexelDepths::TILE * TexelDepths::TILE) as usize * 4;
+            prop_assert!(sparse.stored_bytes() <= t * sparse.finite_count());
+            for &(k, d) in &writes {
+                sparse.set(k % n, d);
+                dense[k % n] = d;
+            }
+            prop_assert_eq!(sparse, TexelDepths::from_dense(res, &dense));
+        }
+    }
+
+    #[test]
+    fn a_sparse_layer_stores_only_its_touched_tiles() {
+        let res = 4096u32;
+        let mut dense = vec![f32::INFINITY; (res * res) as usize];
+        // a horizontal band of content 100 texels tall, as a slab of a street
+        for j in 2000..2100 {
+            for i in 0..res as usize {
+                dense[j * res as usize + i] = 150.0;
+            }
+        }
+        let d = TexelDepths::from_dense(res, &dense);
+        // rows 2000..2100 fall into tile rows 31 (1984..2048) and 32, 64 tiles each
+        assert_eq!(d.stored_bytes(), 2 * 64 * 64 * 64 * 4);
+        assert_eq!(d.finite_count(), 100 * 4096);
+        assert_eq!(d.get(2050 * 4096 + 7), Some(150.0));
+        assert_eq!(d.get(10), Some(f32::INFINITY));
+        assert_eq!(TexelDepths::empty(res).stored_bytes(), 0);
+    }
 
     /// One +Z layer at distance `big_d` recording a surface at depth `d` everywhere.
     fn flat(res: u32, big_d: f64, d: f32) -> LayerDepths {
@@ -286,7 +467,7 @@ mod tests {
             res,
             faces: vec![Face::PosZ],
             distances: vec![vec![big_d]],
-            depth: vec![vec![vec![d; (res * res) as usize]]],
+            depth: vec![vec![TexelDepths::filled(res, d)]],
             frame: None,
         }
     }
@@ -374,7 +555,7 @@ mod tests {
         z[1] = 30.0; // near geometry, on no layer plane
         let mut layers = flat(4, 100.0, 60.0);
         // texel (0, 0) of the layer recorded nothing: pixel (7, 7) of this view lies in texel (3, 3)
-        layers.depth[0][0][3 * 4 + 3] = f32::INFINITY;
+        layers.depth[0][0].set(3 * 4 + 3, f32::INFINITY);
         let r = pixel_errors(&v, &z, &layers, 1e-4, 0.0);
         assert!(r.error_px[0].is_nan() && r.error_px[1].is_nan());
         assert_eq!(r.impostor_pixels, 62);
@@ -385,8 +566,8 @@ mod tests {
     fn gap_filled_texels_use_the_closer_layer() {
         let mut l = flat(4, 100.0, 60.0);
         l.distances[0] = vec![100.0, 50.0];
-        l.depth[0].push(vec![40.0; 16]);
-        l.depth[0][0][5] = f32::INFINITY;
+        l.depth[0].push(TexelDepths::filled(4, 40.0));
+        l.depth[0][0].set(5, f32::INFINITY);
         let t = LayerTexel {
             face_slot: 0,
             layer: 0,
@@ -407,9 +588,9 @@ mod tests {
     fn rim_pixels_are_attributed_to_the_texel_the_rim_shows() {
         let mut l = flat(4, 100.0, 60.0);
         l.distances[0] = vec![100.0, 50.0];
-        l.depth[0].push(vec![40.0; 16]);
+        l.depth[0].push(TexelDepths::filled(4, 40.0));
         // texel (2, 1) of the far layer is transparent; (1, 1) recorded 60 m
-        l.depth[0][0][4 + 2] = f32::INFINITY;
+        l.depth[0][0].set(4 + 2, f32::INFINITY);
         let t = LayerTexel {
             face_slot: 0,
             layer: 0,

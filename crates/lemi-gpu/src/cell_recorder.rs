@@ -29,7 +29,7 @@ use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::clip_border::mark_clip_borders;
 use lemi_core::compress::{close_near_seam, CompressError, FaceLayers, LayerImage};
 use lemi_core::layering::{plan_cell, CellPlan, LayeringError};
-use lemi_core::parallax_error::LayerDepths;
+use lemi_core::parallax_error::{LayerDepths, TexelDepths};
 use lemi_core::{Face, Scene};
 use rayon::prelude::*;
 
@@ -93,7 +93,7 @@ pub struct RecordedLayers {
     /// Per face, its layer images (empty with `depths_only`).
     pub faces: Vec<FaceLayers>,
     /// Per face and layer, the per-texel depth along the face axis (only with `depths_only`).
-    pub depths: Vec<Vec<Vec<f32>>>,
+    pub depths: Vec<Vec<TexelDepths>>,
     pub opaque_recorded: u64,
     /// Texels added to the innermost layers by [`close_near_seam`].
     pub near_seam_texels: u64,
@@ -104,8 +104,9 @@ pub struct RecordedLayers {
 pub struct RecordedFace {
     /// The face's layer images (no images with `depths_only`).
     pub layers: FaceLayers,
-    /// Per layer, the per-texel depth along the face axis (only with `depths_only`).
-    pub depths: Vec<Vec<f32>>,
+    /// Per layer, the per-texel depth along the face axis (only with `depths_only`), stored
+    /// where the layer recorded something.
+    pub depths: Vec<TexelDepths>,
     pub opaque_recorded: u64,
     /// Texels added to the innermost layer by [`close_near_seam`].
     pub near_seam_texels: u64,
@@ -315,7 +316,9 @@ impl<'a> CellRecorder<'a> {
                     source,
                 })?;
             if depths_only {
-                depths.push(frame.depth);
+                // one dense layer at a time: a cell's layers stored whole would not fit (17 GB
+                // for 4 faces of 64 layers at 4096²)
+                depths.push(TexelDepths::from_dense(res, &frame.depth));
                 continue;
             }
             let mut border = vec![false; (res * res) as usize];
