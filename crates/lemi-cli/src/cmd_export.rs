@@ -1,4 +1,4 @@
-//! `lemi export BUNDLE -o DIR [--cells …] [--textures png|ktx2] [--geometry meshopt|plain]
+//! `lemi export BUNDLE -o DIR [--cells …] [--textures png|ktx2] [--geometry meshopt|meshopt-v1|plain]
 //! [--with-near] [--viewer]`: one
 //! binary glTF 2.0 file per view cell plus `cells.json` (`lemi-export`, `docs/EXPORT.md`);
 //! `--viewer` adds the web viewer (`web/viewer`, three.js from `web/node_modules`).
@@ -28,8 +28,10 @@ pub struct Args {
     pub textures: TexturesArg,
     /// How vertex and index data are stored: meshopt (compressed with EXT_meshopt_compression,
     /// the quads' texture coordinates as integers through KHR_mesh_quantization; about a quarter
-    /// of the bytes, for readers with a meshopt decoder such as three.js and Babylon.js) or plain
-    /// (core glTF 2.0 only, for any reader).
+    /// of the bytes, for readers with a meshopt decoder such as three.js and Babylon.js),
+    /// meshopt-v1 (the same through KHR_meshopt_compression with the codec's version 1, about 3
+    /// bytes a quad fewer, for readers of that extension such as three.js r179 and later) or
+    /// plain (core glTF 2.0 only, for any reader).
     #[arg(long, value_enum, default_value = "meshopt")]
     pub geometry: GeometryArg,
     /// Also export each cell's near geometry with its materials (loads the scene the bundle was
@@ -67,9 +69,11 @@ impl From<TexturesArg> for ExportTextures {
     }
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GeometryArg {
     Meshopt,
+    #[value(name = "meshopt-v1")]
+    MeshoptV1,
     Plain,
 }
 
@@ -77,6 +81,7 @@ impl From<GeometryArg> for ExportGeometry {
     fn from(g: GeometryArg) -> Self {
         match g {
             GeometryArg::Meshopt => ExportGeometry::Meshopt,
+            GeometryArg::MeshoptV1 => ExportGeometry::MeshoptV1,
             GeometryArg::Plain => ExportGeometry::Plain,
         }
     }

@@ -31,6 +31,11 @@ pub struct Args {
     /// its Basis Universal files, transcoded by the browser).
     #[arg(long, value_enum, default_value = "png")]
     pub textures: crate::cmd_export::TexturesArg,
+    /// How the exported cells store vertex and index data (as `lemi export --geometry`):
+    /// meshopt (EXT_meshopt_compression), meshopt-v1 (KHR_meshopt_compression, smaller; three.js
+    /// r179 and later, as the viewer's) or plain.
+    #[arg(long, value_enum, default_value = "meshopt")]
+    pub geometry: crate::cmd_export::GeometryArg,
     /// The scene to use instead of the bundle manifest's sources (checked against its fingerprint).
     #[arg(long = "scene", value_name = "SCENE")]
     pub scene_override: Vec<String>,
@@ -59,7 +64,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &[],
             crate::cmd_export::Storage {
                 textures: args.textures.into(),
-                ..Default::default()
+                geometry: args.geometry.into(),
             },
             !args.no_near,
             &args.scene_override,
@@ -73,10 +78,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         out
     } else if args.path.join(lemi_export::INDEX_FILE).is_file() {
-        if args.textures != crate::cmd_export::TexturesArg::Png {
+        if args.textures != crate::cmd_export::TexturesArg::Png
+            || args.geometry != crate::cmd_export::GeometryArg::Meshopt
+        {
             bail!(
-                "--textures applies to a bundle, not to an export directory ({} was exported \
-                 already)",
+                "--textures and --geometry apply to a bundle, not to an export directory ({} was \
+                 exported already)",
                 args.path.display()
             );
         }

@@ -67,11 +67,15 @@ struct ReadBack {
     primitives: usize,
 }
 
-/// The bytes of buffer view `v`, decoded when it is compressed with `EXT_meshopt_compression`.
+/// The bytes of buffer view `v`, decoded when it is compressed with `EXT_meshopt_compression`
+/// or `KHR_meshopt_compression` (meshoptimizer's decoder reads either codec version).
 fn view_bytes(json: &serde_json::Value, blob: &[u8], v: usize) -> Vec<u8> {
     let view = &json["bufferViews"][v];
     let u = |x: &serde_json::Value| x.as_u64().unwrap_or(0) as usize;
-    if let Some(ext) = view["extensions"].get("EXT_meshopt_compression") {
+    let ext = ["EXT_meshopt_compression", "KHR_meshopt_compression"]
+        .iter()
+        .find_map(|name| view["extensions"].get(*name));
+    if let Some(ext) = ext {
         assert_eq!(ext["buffer"], 0, "compressed data in the GLB's chunk");
         let data = &blob[u(&ext["byteOffset"])..u(&ext["byteOffset"]) + u(&ext["byteLength"])];
         let (count, stride) = (u(&ext["count"]), u(&ext["byteStride"]));
@@ -534,6 +538,31 @@ fn dense_cells_export_compressed() {
         "{c}"
     );
     assert_round_trip(&bundle, &d.join("meshopt"));
+    // KHR_meshopt_compression with the codec's version 1: the same vertices, fewer bytes
+    let (v1, c1) = ratio(&d.join("meshopt-v1"), &["--geometry", "meshopt-v1"]);
+    assert!(v1 < compressed, "{v1} vs {compressed}");
+    assert!(c1["quad_bytes"].as_u64() < c["quad_bytes"].as_u64(), "{c1}");
+    let cell = std::fs::read_dir(d.join("meshopt-v1/cells"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let bytes = std::fs::read(&cell).unwrap();
+    let glb = gltf::binary::Glb::from_slice(&bytes).unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&glb.json).unwrap();
+    assert_eq!(
+        json["extensionsRequired"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|e| e.as_str().unwrap().contains("meshopt_compression"))
+            .collect::<Vec<_>>(),
+        vec!["KHR_meshopt_compression"],
+        "{}",
+        json["extensionsRequired"]
+    );
+    assert_round_trip(&bundle, &d.join("meshopt-v1"));
     let (plain, c) = ratio(&d.join("plain"), &["--geometry", "plain"]);
     assert_eq!(
         c["quad_bytes"].as_u64().unwrap(),

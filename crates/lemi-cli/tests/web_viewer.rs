@@ -369,6 +369,59 @@ fn browser_shows_ktx2(format: &str, uploaded: &[&str]) {
     common::assert_clean_error_all(&o, &["--textures", "export directory"]);
 }
 
+/// Cells exported with `KHR_meshopt_compression` and the vertex codec's version 1 (`lemi serve
+/// --geometry meshopt-v1`): three.js decodes them to the picture `lemi render` draws.
+#[test]
+fn the_browser_reads_khr_meshopt_compression() {
+    let Some(web) = browser_tools() else { return };
+    let d = tmp("web", "meshopt-v1");
+    let bundle = d.join("b");
+    let mut args = vec!["bake"];
+    args.extend(SMALL);
+    args.extend(["-o", bundle.to_str().unwrap()]);
+    let o = lemi(&args);
+    assert!(o.status.success(), "bake: {}", stderr(&o));
+    let site = d.join("site");
+    let (_server, url) = serve(&[
+        bundle.to_str().unwrap(),
+        "-o",
+        site.to_str().unwrap(),
+        "--geometry",
+        "meshopt-v1",
+    ]);
+    let index: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(site.join("cells.json")).unwrap()).unwrap();
+    assert_eq!(index["geometry"], "meshopt-v1", "{index}");
+    let (w, h, fov_y) = (960u32, 540u32, 60.0f64);
+    let (eye, dir) = ("18,1.7,-2", "1,0,0");
+    let shot = d.join("v1-browser.png");
+    let page = format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
+    let size = format!("{w}x{h}");
+    let Some(v) = browser(
+        &web,
+        &page,
+        &["--screenshot", shot.to_str().unwrap(), "--size", &size],
+    ) else {
+        return;
+    };
+    let reference = d.join("v1-lemi.png");
+    render(&bundle, eye, dir, fov_y, (w, h), &reference);
+    let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
+    eprintln!("meshopt-v1: {note} ({})", v["renderer"]);
+    assert!(agreement >= 0.99, "coverage agreement {agreement}");
+    assert!(flip < FLIP_BOUND, "mean FLIP {flip} ≥ {FLIP_BOUND}");
+    // `--geometry` on an export directory is a clear error (the geometry is chosen at export)
+    let o = lemi(&[
+        "serve",
+        site.to_str().unwrap(),
+        "--geometry",
+        "plain",
+        "--port",
+        "0",
+    ]);
+    common::assert_clean_error_all(&o, &["--geometry", "export directory"]);
+}
+
 #[test]
 fn the_viewer_predicts_as_the_runtime() {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../web");

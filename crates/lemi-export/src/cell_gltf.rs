@@ -438,7 +438,7 @@ pub fn export_cell(
 /// coordinates `16·t + 1` (t in texels) to `t / side`, or `None` when its quads keep f32
 /// coordinates (plain geometry, or a side above [`MAX_QUANTIZED_SIDE`]).
 fn quantized_texcoords(geometry: ExportGeometry, width: u32, height: u32) -> Option<[[f64; 2]; 2]> {
-    (geometry == ExportGeometry::Meshopt
+    (geometry != ExportGeometry::Plain
         && width <= MAX_QUANTIZED_SIDE
         && height <= MAX_QUANTIZED_SIDE)
         .then(|| {

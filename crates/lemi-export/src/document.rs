@@ -21,6 +21,9 @@ use crate::{ExportError, ExportGeometry};
 
 /// The name of the extension for compressed vertex and index data.
 pub const MESHOPT: &str = "EXT_meshopt_compression";
+/// Its Khronos successor, which also reads the vertex codec's version 1
+/// ([`ExportGeometry::MeshoptV1`]).
+pub const MESHOPT_KHR: &str = "KHR_meshopt_compression";
 /// The name of the extension for integer vertex attributes.
 pub const QUANTIZATION: &str = "KHR_mesh_quantization";
 
@@ -111,7 +114,10 @@ impl Document {
         filter: Option<&str>,
     ) -> Result<json::Index<json::buffer::View>, ExportError> {
         let (encoded, mode) = match kind {
-            ViewKind::Vertices => (encode_vertices(bytes, stride)?, "ATTRIBUTES"),
+            ViewKind::Vertices => (
+                encode_vertices(bytes, stride, self.codec_version())?,
+                "ATTRIBUTES",
+            ),
             ViewKind::Indices => (encode_triangles(bytes, stride)?, "TRIANGLES"),
             ViewKind::Other => {
                 return Err(ExportError::Gltf(
@@ -127,7 +133,8 @@ impl Document {
         self.fallback_len += bytes.len();
         self.geometry_bytes.stored += encoded.len() as u64;
         self.geometry_bytes.decoded += bytes.len() as u64;
-        self.use_extension(MESHOPT, true);
+        let name = self.meshopt_name();
+        self.use_extension(name, true);
         let mut ext = json::extensions::buffer::View::default();
         let mut meshopt = serde_json::json!({
             "buffer": 0,
@@ -140,7 +147,7 @@ impl Document {
         if let Some(filter) = filter {
             meshopt["filter"] = filter.into();
         }
-        ext.others.insert(MESHOPT.into(), meshopt);
+        ext.others.insert(name.into(), meshopt);
         Ok(self.root.push(json::buffer::View {
             buffer: json::Index::new(1),
             byte_length: USize64::from(bytes.len()),
@@ -154,6 +161,17 @@ impl Document {
         }))
     }
 
+    /// The meshopt extension of this document's geometry (the EXT one for plain documents, which
+    /// never name it).
+    fn meshopt_name(&self) -> &'static str {
+        self.geometry.meshopt_extension().unwrap_or(MESHOPT)
+    }
+
+    /// The vertex codec's bitstream version: 1 with `KHR_meshopt_compression`, else 0.
+    fn codec_version(&self) -> u8 {
+        u8::from(self.geometry == ExportGeometry::MeshoptV1)
+    }
+
     /// A view of vertex or index data: compressed with [`ExportGeometry::Meshopt`], else as is.
     fn data_view(
         &mut self,
@@ -164,9 +182,10 @@ impl Document {
         filter: Option<&str>,
     ) -> Result<json::Index<json::buffer::View>, ExportError> {
         match (self.geometry, kind) {
-            (ExportGeometry::Meshopt, ViewKind::Vertices | ViewKind::Indices) => {
-                self.compressed_view(bytes, count, stride, kind, filter)
-            }
+            (
+                ExportGeometry::Meshopt | ExportGeometry::MeshoptV1,
+                ViewKind::Vertices | ViewKind::Indices,
+            ) => self.compressed_view(bytes, count, stride, kind, filter),
             _ => Ok(self.view(bytes, kind)),
         }
     }
@@ -238,7 +257,7 @@ impl Document {
         tolerance: &[f64],
     ) -> Result<json::Index<json::Accessor>, ExportError> {
         let filtered = match self.geometry {
-            ExportGeometry::Meshopt => exponential_filter(p, tolerance),
+            ExportGeometry::Meshopt | ExportGeometry::MeshoptV1 => exponential_filter(p, tolerance),
             ExportGeometry::Plain => None,
         };
         let Some((words, decoded)) = filtered else {
@@ -413,8 +432,10 @@ impl Document {
             // the buffer the compressed views decode into: no data, marked as the extension's
             // fallback (readers that know the extension never load it)
             let mut ext = json::extensions::buffer::Buffer::default();
-            ext.others
-                .insert(MESHOPT.into(), serde_json::json!({ "fallback": true }));
+            ext.others.insert(
+                self.meshopt_name().into(),
+                serde_json::json!({ "fallback": true }),
+            );
             self.root.buffers.push(json::Buffer {
                 byte_length: USize64::from(self.fallback_len),
                 name: Some("meshopt fallback".into()),
@@ -467,30 +488,38 @@ fn target(kind: ViewKind) -> Option<json::validation::Checked<json::buffer::Targ
 }
 
 /// meshoptimizer's vertex codec over `bytes`, elements of `stride` bytes (a multiple of 4, at
-/// most 256, as `EXT_meshopt_compression` requires), level 2 (its default), bitstream version 0,
-/// the one the extension specifies (checked: a newer codec version would not be readable).
-fn encode_vertices(bytes: &[u8], stride: usize) -> Result<Vec<u8>, ExportError> {
-    fn encode<const S: usize>(bytes: &[u8]) -> Result<Vec<u8>, ExportError> {
-        let elements: Vec<[u8; S]> = bytes
-            .chunks_exact(S)
-            .map(|c| std::array::from_fn(|i| c[i]))
-            .collect();
-        meshopt::encode_vertex_buffer(&elements)
-            .map_err(|e| ExportError::Gltf(format!("meshopt vertex encoding: {e}")))
-    }
-    let encoded = match stride {
-        4 => encode::<4>(bytes),
-        8 => encode::<8>(bytes),
-        12 => encode::<12>(bytes),
-        16 => encode::<16>(bytes),
-        _ => Err(ExportError::Gltf(format!(
-            "no vertex codec for {stride}-byte vertices"
-        ))),
-    }?;
-    // the codec's header byte: 0xa0 | version
-    if encoded.first() != Some(&0xa0) {
+/// most 256, as `EXT_meshopt_compression` requires), at its default level 2, in bitstream
+/// `version` 0 (the one `EXT_meshopt_compression` specifies) or 1 (`KHR_meshopt_compression`);
+/// checked against the header the codec wrote.
+fn encode_vertices(bytes: &[u8], stride: usize, version: u8) -> Result<Vec<u8>, ExportError> {
+    if stride == 0 || stride % 4 != 0 || stride > 256 || bytes.len() % stride != 0 {
         return Err(ExportError::Gltf(format!(
-            "meshoptimizer wrote vertex codec header {:?}; EXT_meshopt_compression reads version 0 (0xa0) only",
+            "no vertex codec for {stride}-byte vertices over {} bytes",
+            bytes.len()
+        )));
+    }
+    let count = bytes.len() / stride;
+    // SAFETY: meshoptimizer's bound for these sizes is the buffer's length, and the encoder
+    // reads `count · stride` bytes of `bytes` and writes at most `bound` bytes of `encoded`.
+    let encoded = unsafe {
+        let bound = meshopt::ffi::meshopt_encodeVertexBufferBound(count, stride);
+        let mut encoded = vec![0u8; bound];
+        let n = meshopt::ffi::meshopt_encodeVertexBufferLevel(
+            encoded.as_mut_ptr(),
+            encoded.len(),
+            bytes.as_ptr().cast(),
+            count,
+            stride,
+            2,
+            i32::from(version),
+        );
+        encoded.truncate(n);
+        encoded
+    };
+    // the codec's header byte: 0xa0 | version
+    if encoded.first() != Some(&(0xa0 | version)) {
+        return Err(ExportError::Gltf(format!(
+            "meshoptimizer wrote vertex codec header {:?}, not version {version}",
             encoded.first()
         )));
     }

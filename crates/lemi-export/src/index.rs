@@ -113,7 +113,8 @@ pub struct ExportIndex {
     pub textures: String,
     /// The bundle's texture format (`png`, `bc7`, `bc1`).
     pub bundle_texture_format: String,
-    /// How vertex and index data are stored: `meshopt` (`EXT_meshopt_compression`) or `plain`.
+    /// How vertex and index data are stored: `meshopt` (`EXT_meshopt_compression`), `meshopt-v1`
+    /// (`KHR_meshopt_compression`, vertex codec version 1) or `plain`.
     #[serde(default)]
     pub geometry: String,
     /// Whether the cell files hold the near geometry.

@@ -18,7 +18,7 @@ use lemi_core::cell::CellId;
 use lemi_core::Scene;
 
 pub use cell_gltf::{export_cell, opaque_quads, quad_order, CellGlb, CellOptions};
-pub use document::{GeometryBytes, MESHOPT, QUANTIZATION};
+pub use document::{GeometryBytes, MESHOPT, MESHOPT_KHR, QUANTIZATION};
 pub use index::{CellIndexEntry, ExportIndex, PredictionRule, INDEX_FILE, INDEX_FORMAT};
 
 /// How the macro-textures are stored in the exported files.
@@ -50,6 +50,10 @@ pub enum ExportGeometry {
     /// the bytes; needs a reader with a meshopt decoder (three.js, Babylon.js, glTFast).
     #[default]
     Meshopt,
+    /// The same through `KHR_meshopt_compression` with meshoptimizer's vertex codec version 1
+    /// (3 bytes a quad fewer, docs/EXPORT.md): for readers of that extension (three.js r179 and
+    /// later).
+    MeshoptV1,
     /// Core glTF 2.0 only (f32 attributes, u16/u32 indices): any reader.
     Plain,
 }
@@ -58,7 +62,17 @@ impl ExportGeometry {
     pub fn name(self) -> &'static str {
         match self {
             ExportGeometry::Meshopt => "meshopt",
+            ExportGeometry::MeshoptV1 => "meshopt-v1",
             ExportGeometry::Plain => "plain",
+        }
+    }
+
+    /// The glTF extension the compressed views use, `None` for plain geometry.
+    pub fn meshopt_extension(self) -> Option<&'static str> {
+        match self {
+            ExportGeometry::Meshopt => Some(document::MESHOPT),
+            ExportGeometry::MeshoptV1 => Some(document::MESHOPT_KHR),
+            ExportGeometry::Plain => None,
         }
     }
 }
