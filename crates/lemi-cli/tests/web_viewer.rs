@@ -295,53 +295,95 @@ fn the_browser_shows_an_etc1s_bake_through_the_basis_transcoder() {
     browser_shows_ktx2("etc1s", &["BC7", "BC3"]);
 }
 
+/// The small bake with `bake_extra`, exported and served by `lemi serve` with `serve_extra`:
+/// the test directory, the bundle, the export directory, the server and its URL.
+fn bake_and_serve(
+    name: &str,
+    bake_extra: &[&str],
+    serve_extra: &[&str],
+) -> (PathBuf, PathBuf, PathBuf, Server, String) {
+    let d = tmp("web", name);
+    let bundle = d.join("b");
+    let mut args = vec!["bake"];
+    args.extend(SMALL);
+    args.extend(bake_extra);
+    args.extend(["-o", bundle.to_str().unwrap()]);
+    let o = lemi(&args);
+    assert!(o.status.success(), "bake: {}", stderr(&o));
+    let site = d.join("site");
+    let mut args = vec![bundle.to_str().unwrap(), "-o", site.to_str().unwrap()];
+    args.extend(serve_extra);
+    let (server, url) = serve(&args);
+    (d, bundle, site, server, url)
+}
+
+/// The viewer at `url` from the camera of the `along-x` view, screenshot against `lemi render
+/// bundle` of the same camera: the page's state (`Err` when the page failed), or `None` after a
+/// visible skip.
+fn along_x_against_lemi(
+    web: &Path,
+    url: &str,
+    d: &Path,
+    bundle: &Path,
+    label: &str,
+) -> Option<Result<serde_json::Value, serde_json::Value>> {
+    let (w, h, fov_y) = (960u32, 540u32, 60.0f64);
+    let (eye, dir) = ("18,1.7,-2", "1,0,0");
+    let shot = d.join(format!("{label}-browser.png"));
+    let page = format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
+    let size = format!("{w}x{h}");
+    let (ok, v) = browser_run(
+        web,
+        &page,
+        &["--screenshot", shot.to_str().unwrap(), "--size", &size],
+    )?;
+    if !ok {
+        return Some(Err(v));
+    }
+    let reference = d.join(format!("{label}-lemi.png"));
+    render(bundle, eye, dir, fov_y, (w, h), &reference);
+    let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
+    eprintln!("{label}: {note} ({})", v["renderer"]);
+    assert!(agreement >= 0.99, "{label}: coverage agreement {agreement}");
+    assert!(
+        flip < FLIP_BOUND,
+        "{label}: mean FLIP {flip} ≥ {FLIP_BOUND}"
+    );
+    Some(Ok(v))
+}
+
 /// `format`'s bake through `lemi serve --textures ktx2` in the browser, against `lemi render`;
 /// `uploaded` lists the block formats the page may upload.
 fn browser_shows_ktx2(format: &str, uploaded: &[&str]) {
     let Some(web) = browser_tools() else { return };
-    let d = tmp("web", &format!("ktx2-{format}"));
-    let bundle = d.join("b");
-    let mut args = vec!["bake"];
-    args.extend(SMALL);
-    args.extend(["--texture-format", format, "-o", bundle.to_str().unwrap()]);
-    let o = lemi(&args);
-    assert!(o.status.success(), "bake: {}", stderr(&o));
-    let site = d.join("site");
-    let (_server, url) = serve(&[
-        bundle.to_str().unwrap(),
-        "-o",
-        site.to_str().unwrap(),
-        "--textures",
-        "ktx2",
-    ]);
+    let (d, bundle, site, _server, url) = bake_and_serve(
+        &format!("ktx2-{format}"),
+        &["--texture-format", format],
+        &["--textures", "ktx2"],
+    );
     let index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(site.join("cells.json")).unwrap()).unwrap();
     assert_eq!(index["textures"], "ktx2", "{index}");
     assert!(site
         .join("vendor/three/examples/jsm/loaders/KTX2Loader.js")
         .is_file());
-    let (w, h, fov_y) = (960u32, 540u32, 60.0f64);
-    let (eye, dir) = ("18,1.7,-2", "1,0,0");
-    let shot = d.join("ktx2-browser.png");
-    let page = format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
-    let size = format!("{w}x{h}");
-    let Some((ok, v)) = browser_run(
-        &web,
-        &page,
-        &["--screenshot", shot.to_str().unwrap(), "--size", &size],
-    ) else {
+    let Some(result) = along_x_against_lemi(&web, &url, &d, &bundle, &format!("ktx2 {format}"))
+    else {
         return;
     };
-    if !ok {
-        let error = v["error"].as_str().unwrap_or_default();
-        // a browser without the block format gets the viewer's clear message, nothing else
-        assert!(
-            error.contains("which this browser lacks"),
-            "the viewer failed: {v}"
-        );
-        lemi_testkit::skip(&format!("this browser cannot sample {format}: {error}"));
-        return;
-    }
+    let v = match result {
+        Ok(v) => v,
+        Err(v) => {
+            let error = v["error"].as_str().unwrap_or_default();
+            // a browser without the block format gets the viewer's clear message, nothing else
+            assert!(
+                error.contains("which this browser lacks"),
+                "the viewer failed: {v}"
+            );
+            lemi_testkit::skip(&format!("this browser cannot sample {format}: {error}"));
+            return;
+        }
+    };
     // the blocks were uploaded in a block format, not decoded to RGBA8
     let got = v["texture_formats"].as_array().cloned().unwrap_or_default();
     assert!(
@@ -351,12 +393,6 @@ fn browser_shows_ktx2(format: &str, uploaded: &[&str]) {
                 .all(|f| uploaded.contains(&f.as_str().unwrap_or(""))),
         "{format}: {v}"
     );
-    let reference = d.join("ktx2-lemi.png");
-    render(&bundle, eye, dir, fov_y, (w, h), &reference);
-    let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
-    eprintln!("ktx2 {format}: {note} ({})", v["renderer"]);
-    assert!(agreement >= 0.99, "coverage agreement {agreement}");
-    assert!(flip < FLIP_BOUND, "mean FLIP {flip} ≥ {FLIP_BOUND}");
     // `--textures` on an export directory is a clear error (the textures are chosen at export)
     let o = lemi(&[
         "serve",
@@ -374,42 +410,14 @@ fn browser_shows_ktx2(format: &str, uploaded: &[&str]) {
 #[test]
 fn the_browser_reads_khr_meshopt_compression() {
     let Some(web) = browser_tools() else { return };
-    let d = tmp("web", "meshopt-v1");
-    let bundle = d.join("b");
-    let mut args = vec!["bake"];
-    args.extend(SMALL);
-    args.extend(["-o", bundle.to_str().unwrap()]);
-    let o = lemi(&args);
-    assert!(o.status.success(), "bake: {}", stderr(&o));
-    let site = d.join("site");
-    let (_server, url) = serve(&[
-        bundle.to_str().unwrap(),
-        "-o",
-        site.to_str().unwrap(),
-        "--geometry",
-        "meshopt-v1",
-    ]);
+    let (d, bundle, site, _server, url) =
+        bake_and_serve("meshopt-v1", &[], &["--geometry", "meshopt-v1"]);
     let index: serde_json::Value =
         serde_json::from_slice(&std::fs::read(site.join("cells.json")).unwrap()).unwrap();
     assert_eq!(index["geometry"], "meshopt-v1", "{index}");
-    let (w, h, fov_y) = (960u32, 540u32, 60.0f64);
-    let (eye, dir) = ("18,1.7,-2", "1,0,0");
-    let shot = d.join("v1-browser.png");
-    let page = format!("{url}?size={w}x{h}&hud=0&transparent=1&fov={fov_y}&eye={eye}&dir={dir}");
-    let size = format!("{w}x{h}");
-    let Some(v) = browser(
-        &web,
-        &page,
-        &["--screenshot", shot.to_str().unwrap(), "--size", &size],
-    ) else {
-        return;
-    };
-    let reference = d.join("v1-lemi.png");
-    render(&bundle, eye, dir, fov_y, (w, h), &reference);
-    let (agreement, flip, note) = agreement(&reference, &shot, w, h, fov_y);
-    eprintln!("meshopt-v1: {note} ({})", v["renderer"]);
-    assert!(agreement >= 0.99, "coverage agreement {agreement}");
-    assert!(flip < FLIP_BOUND, "mean FLIP {flip} ≥ {FLIP_BOUND}");
+    if let Some(Err(v)) = along_x_against_lemi(&web, &url, &d, &bundle, "meshopt-v1") {
+        panic!("the viewer failed: {v}");
+    }
     // `--geometry` on an export directory is a clear error (the geometry is chosen at export)
     let o = lemi(&[
         "serve",
