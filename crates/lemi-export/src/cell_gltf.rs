@@ -438,13 +438,12 @@ pub fn export_cell(
 /// coordinates `16·t + 1` (t in texels) to `t / side`, or `None` when its quads keep f32
 /// coordinates (plain geometry, or a side above [`MAX_QUANTIZED_SIDE`]).
 fn quantized_texcoords(geometry: ExportGeometry, width: u32, height: u32) -> Option<[[f64; 2]; 2]> {
-    (geometry != ExportGeometry::Plain
-        && width <= MAX_QUANTIZED_SIDE
-        && height <= MAX_QUANTIZED_SIDE)
-        .then(|| {
+    (geometry.compressed() && width <= MAX_QUANTIZED_SIDE && height <= MAX_QUANTIZED_SIDE).then(
+        || {
             let (sx, sy) = (1.0 / (16.0 * width as f64), 1.0 / (16.0 * height as f64));
             [[sx, sy], [-sx, -sy]]
-        })
+        },
+    )
 }
 
 /// The macro-textures as image bytes and MIME type, in `header.macros` order.

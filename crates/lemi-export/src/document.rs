@@ -172,7 +172,7 @@ impl Document {
         u8::from(self.geometry == ExportGeometry::MeshoptV1)
     }
 
-    /// A view of vertex or index data: compressed with [`ExportGeometry::Meshopt`], else as is.
+    /// A view of vertex or index data: compressed unless the geometry is plain, else as is.
     fn data_view(
         &mut self,
         bytes: &[u8],
@@ -181,11 +181,10 @@ impl Document {
         kind: ViewKind,
         filter: Option<&str>,
     ) -> Result<json::Index<json::buffer::View>, ExportError> {
-        match (self.geometry, kind) {
-            (
-                ExportGeometry::Meshopt | ExportGeometry::MeshoptV1,
-                ViewKind::Vertices | ViewKind::Indices,
-            ) => self.compressed_view(bytes, count, stride, kind, filter),
+        match kind {
+            ViewKind::Vertices | ViewKind::Indices if self.geometry.compressed() => {
+                self.compressed_view(bytes, count, stride, kind, filter)
+            }
             _ => Ok(self.view(bytes, kind)),
         }
     }
@@ -256,9 +255,10 @@ impl Document {
         p: &[[f32; 3]],
         tolerance: &[f64],
     ) -> Result<json::Index<json::Accessor>, ExportError> {
-        let filtered = match self.geometry {
-            ExportGeometry::Meshopt | ExportGeometry::MeshoptV1 => exponential_filter(p, tolerance),
-            ExportGeometry::Plain => None,
+        let filtered = if self.geometry.compressed() {
+            exponential_filter(p, tolerance)
+        } else {
+            None
         };
         let Some((words, decoded)) = filtered else {
             return self.positions(p);

@@ -67,6 +67,12 @@ impl ExportGeometry {
         }
     }
 
+    /// Whether vertex and index views are stored compressed (and the quads' texture coordinates
+    /// as integers).
+    pub fn compressed(self) -> bool {
+        self.meshopt_extension().is_some()
+    }
+
     /// The glTF extension the compressed views use, `None` for plain geometry.
     pub fn meshopt_extension(self) -> Option<&'static str> {
         match self {
