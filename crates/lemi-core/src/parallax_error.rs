@@ -55,7 +55,7 @@ pub struct LayerDepths {
 /// certificate holds every layer of a cell at once, which stored whole would take
 /// `faces · layers · res² · 4` bytes (4.3 GB for 4 faces of 64 layers at 2048², 17 GB at 4096²),
 /// while a slab's content touches a fraction of its face.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default)]
 pub struct TexelDepths {
     res: u32,
     /// Row-major over `⌈res / TILE⌉²` tiles; a stored tile holds `TILE²` depths, row-major
@@ -175,6 +175,24 @@ impl TexelDepths {
     pub fn stored_bytes(&self) -> usize {
         let t = Self::TILE as usize;
         self.tiles.iter().flatten().count() * t * t * std::mem::size_of::<f32>()
+    }
+}
+
+/// Equal when every texel reads the same: a stored tile whose texels were all set back to
+/// infinity equals one not stored.
+impl PartialEq for TexelDepths {
+    fn eq(&self, other: &Self) -> bool {
+        let empty = |t: &[f32]| t.iter().all(|&d| d == f32::INFINITY);
+        self.res == other.res
+            && self
+                .tiles
+                .iter()
+                .zip(&other.tiles)
+                .all(|(a, b)| match (a, b) {
+                    (Some(a), Some(b)) => a == b,
+                    (Some(t), None) | (None, Some(t)) => empty(t),
+                    (None, None) => true,
+                })
     }
 }
 
