@@ -432,6 +432,7 @@ pub fn compress_options(params: &BakeParams, cell: &ViewCell) -> CompressOptions
             ..Default::default()
         },
         gap_fill: Recording::of(params.layering).gap_fill,
+        outline_copies: params.outline_copies && Recording::of(params.layering).crack_free,
         micro: MicroTextureOptions {
             cell_size: params.micro_grid,
             threshold: params.micro_threshold,

@@ -73,6 +73,7 @@ pub fn object_bake_params(
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format,
+        outline_copies: false,
     };
     object_params(setup, layers, &base)
 }

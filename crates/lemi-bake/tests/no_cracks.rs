@@ -397,6 +397,7 @@ fn params(faces: &[Face]) -> BakeParams {
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
+        outline_copies: false,
     }
 }
 

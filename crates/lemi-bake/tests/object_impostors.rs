@@ -379,6 +379,7 @@ fn an_object_impostor_replaces_its_object_in_a_cells_near_field() {
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
+        outline_copies: false,
     };
     let probe = scene(vec![ball(DVec3::new(30.0, 3.0, 1.0), 4.0)]);
     let near_field = lemi_bake::Baker::new(&gpu, &probe, env_params.clone())
@@ -476,5 +477,6 @@ fn scene_params() -> BakeParams {
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
+        outline_copies: false,
     }
 }

@@ -52,6 +52,7 @@ fn params(layering: Layering) -> BakeParams {
         micro_threshold: 0.6,
         layering,
         texture_format: Default::default(),
+        outline_copies: false,
     }
 }
 

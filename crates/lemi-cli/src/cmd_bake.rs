@@ -105,6 +105,13 @@ pub struct Args {
     /// (lossless, RGBA8 in texture memory). --strategy hlod has no macro-textures.
     #[arg(long, value_parser = parse_texture_format)]
     pub texture_format: Option<TextureFormat>,
+    /// Copy each layer's outline texels into the adjacent layer on the side where parallax
+    /// uncovers the strip beside them (docs/COMPRESSION.md, "Outline copies"): no background or
+    /// farther layer shows through an outline from anywhere in the cell, at the price of copies
+    /// drawn up to 2α off. With α of a third of an output pixel (`--alpha-deg`) every pixel
+    /// stays within one. Not with --strategy equidistant.
+    #[arg(long)]
+    pub outline_copies: bool,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
     #[arg(long, default_value_t = 8)]
     pub micro_grid: u32,
@@ -165,6 +172,7 @@ fn flag_of(e: &ParamsError) -> &'static str {
         ParamsError::MicroGrid { .. } => "--micro-grid",
         ParamsError::MicroThreshold(_) => "--micro-threshold",
         ParamsError::Overlap(_) => "--overlap",
+        ParamsError::OutlineCopies => "--outline-copies",
         ParamsError::Hlod(e) => match e.option() {
             "band_factor" => "--hlod-band-factor",
             _ => "--hlod-error-px",
@@ -352,6 +360,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         micro_threshold: args.micro_threshold,
         layering,
         texture_format,
+        outline_copies: args.outline_copies,
     };
     params
         .validate()
@@ -368,6 +377,14 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
                 ));
             }
         }
+    }
+
+    if let (true, Some(f), Some(w)) = (args.outline_copies, fov, width) {
+        // the copies are drawn up to 2α off: within a pixel needs α ≤ ½ px
+        warnings.push(format!(
+            "--outline-copies with α of one pixel of the {w} px, {f}° output view draws copies up              to 2 px off; to keep every pixel within one, give α a third of a pixel:              --alpha-deg {:.5}",
+            (alpha / 3.0).to_degrees()
+        ));
     }
 
     let sources = absolute_sources(&args.scenes);

@@ -214,6 +214,7 @@ fn bake(
         output_fov: args.output_fov,
         output_width: args.output_width,
         alpha_deg: args.alpha_deg,
+        outline_copies: false,
         micro_grid: 8,
         micro_threshold: 0.6,
         strategy: k.name().into(),

@@ -96,6 +96,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         output_fov: Some(OUT_FOV_X),
         output_width: Some(OUT_W),
         alpha_deg: None,
+        outline_copies: false,
         micro_grid: 8,
         micro_threshold: 0.6,
         strategy: "lemi".into(),

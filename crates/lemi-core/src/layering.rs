@@ -309,6 +309,7 @@ mod tests {
             micro_threshold: 0.6,
             layering,
             texture_format: Default::default(),
+            outline_copies: false,
         }
     }
 

@@ -48,6 +48,10 @@ pub struct LayerDepths {
     /// then those of its canonical frame (reference viewpoint at the canonical origin, `center`
     /// unused), and world points are mapped by it.
     pub frame: Option<crate::object_cell::ObjectFrame>,
+    /// The bake copied outline texels into adjacent layers (`BakeParams::outline_copies`,
+    /// [`crate::compress::copy_outlines`]): a texel without a depth of its own or of the next
+    /// closer layer may hold a copy from the next farther layer ([`LayerDepths::recorded_depth`]).
+    pub outline_copies: bool,
 }
 
 /// One layer's per-texel depths, `f32::INFINITY` where nothing was recorded, kept in tiles of
@@ -316,19 +320,32 @@ impl LayerDepths {
         }
     }
 
-    /// The recorded depth of a texel, or that of the next closer layer (a gap-filled texel), and
-    /// whether it came from the closer layer.
+    /// The recorded depth of a texel, or that of the next closer layer (a gap-filled texel or
+    /// an outline copied farther), and whether it came from another layer. With
+    /// [`LayerDepths::outline_copies`], a texel with neither takes the depth of the next farther
+    /// layer where that layer's point lies in front of its plane, the only points
+    /// [`crate::compress::copy_outlines`] copies nearer. (Crediting every such texel to the
+    /// farther layer would also take the innermost layer's near-field seam texels, which show
+    /// the near geometry, for copies, and report errors they do not have.)
     pub fn recorded_depth(&self, t: &LayerTexel) -> Option<(f64, bool)> {
         let layers = self.depth.get(t.face_slot)?;
         let idx = t.j as usize * self.res as usize + t.i as usize;
-        layers
+        let own_or_closer = layers
             .get(t.layer..)?
             .iter()
             .take(2)
             .enumerate()
             .filter_map(|(k, l)| l.get(idx).map(|d| (k, d)))
             .find(|(_, d)| d.is_finite())
-            .map(|(k, d)| (d as f64, k > 0))
+            .map(|(k, d)| (d as f64, k > 0));
+        if own_or_closer.is_some() || !self.outline_copies {
+            return own_or_closer;
+        }
+        // far to near: the farther layer is the previous one
+        let farther = t.layer.checked_sub(1)?;
+        let plane = *self.distances.get(t.face_slot)?.get(farther)?;
+        let d = layers.get(farther)?.get(idx)?;
+        (d.is_finite() && (d as f64) < plane).then_some((d as f64, true))
     }
 }
 
@@ -347,7 +364,8 @@ pub const RASTER_SLACK_TEXELS: f64 = 1.0 / 64.0;
 pub struct ParallaxErrors {
     /// Per pixel, the error in pixels; NaN where not an impostor texel (see module docs).
     pub error_px: Vec<f32>,
-    /// Per pixel, whether it shows a gap-filled texel (its true point is the closer layer's).
+    /// Per pixel, whether it shows a texel filled from an adjacent layer (its true point is that
+    /// layer's): a gap-filled texel, or an outline copy.
     pub gap_filled: Vec<bool>,
     /// Pixels attributed to a layer texel.
     pub impostor_pixels: u64,
@@ -487,6 +505,7 @@ mod tests {
             distances: vec![vec![big_d]],
             depth: vec![vec![TexelDepths::filled(res, d)]],
             frame: None,
+            outline_copies: false,
         }
     }
 

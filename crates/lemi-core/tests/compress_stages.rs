@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use lemi_core::compress::{
-    analyze_micro_textures, extract_micro_textures, fill_gaps, quad_corners, remove_hidden_texels,
+    analyze_micro_textures, copy_outlines, extract_micro_textures, fill_gaps, quad_corners, remove_hidden_texels,
     CompressError, GapSources, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect,
     TRANSPARENT,
 };
@@ -319,6 +319,116 @@ fn gap_fill_by_default_copies_only_far_border_clip_edges() {
     assert_eq!(&to_art(&paper[1])[1][..4], "..ab");
 }
 
+/// `img` with behind-plane flags from ASCII art: `b` behind the layer's plane, anything else not.
+fn with_sides(img: LayerImage, rows: &[&str]) -> LayerImage {
+    let flags = rows
+        .iter()
+        .flat_map(|r| r.chars().map(|c| c == 'b'))
+        .collect();
+    img.with_behind_plane(flags).expect("one flag a texel")
+}
+
+#[test]
+fn outline_copies_go_to_the_side_their_point_lies_on() {
+    // nearest first: the middle layer's square has its left column behind its plane, the rest
+    // in front of it (or on it)
+    let near = art(&[
+        "........", //
+        "........", //
+        "........", //
+        "........", //
+        "........", //
+        "........", //
+        "........", //
+        "......nn", //
+    ]);
+    let mid = with_sides(
+        art(&[
+            "........", //
+            ".mmmm...", //
+            ".mmmm...", //
+            ".mmmm...", //
+            ".mmmm...", //
+            "........", //
+            "........", //
+            "........", //
+        ]),
+        &[
+            "........", //
+            ".bf.....", //
+            ".bff....", //
+            ".bff....", //
+            ".bfff...", //
+            "........", //
+            "........", //
+            "........", //
+        ],
+    );
+    let far = art(&[
+        "........", //
+        "........", //
+        "........", //
+        "........", //
+        "ffff....", //
+        "........", //
+        "........", //
+        "........", //
+    ]);
+    let mut layers = vec![near, mid, far];
+    let added = copy_outlines(&mut layers).expect("copies");
+    // the behind column goes farther, except where the farther layer is opaque already (row 4)
+    assert_eq!(
+        to_art(&layers[2]),
+        [
+            "........", //
+            ".m......", //
+            ".m......", //
+            ".m......", //
+            "ffff....", //
+            "........", //
+            "........", //
+            "........", //
+        ]
+    );
+    // the rest of the outline goes nearer; the interior (2..3, 2..3) stays; the near layer's
+    // texels have no flags and send nothing
+    assert_eq!(
+        to_art(&layers[0]),
+        [
+            "........", //
+            "..mmm...", //
+            "....m...", //
+            "....m...", //
+            "..mmm...", //
+            "........", //
+            "........", //
+            "......nn", //
+        ]
+    );
+    assert_eq!(to_art(&layers[1])[1], ".mmmm...", "the source is unchanged");
+    assert_eq!(added, 3 + 8);
+    // every copy is a clip-border texel (it hides nothing); the recorded texels are not
+    let i = layers[0].index(2, 1);
+    assert!(layers[0].border[i] && layers[2].border[layers[2].index(1, 2)]);
+    assert!(!layers[2].border[layers[2].index(0, 4)]);
+    assert!(!layers[0].border[layers[0].index(6, 7)]);
+    // copies are never copied on: a second pass sends only the recorded outlines again, which
+    // find their targets taken
+    assert_eq!(copy_outlines(&mut layers).expect("copies"), 0);
+}
+
+#[test]
+fn outline_copies_need_the_recorders_sides_and_matching_images() {
+    let mut layers = vec![square(8, 2, 5, 'a'), square(8, 1, 6, 'b')];
+    assert_eq!(copy_outlines(&mut layers).expect("no flags"), 0);
+    assert!(LayerImage::new(8).with_behind_plane(vec![true; 63]).is_err());
+    let mut mixed = vec![
+        with_sides(square(8, 2, 5, 'a'), &["bbbbbbbb"; 8]),
+        LayerImage::new(4),
+    ];
+    assert!(copy_outlines(&mut mixed).is_err());
+}
+
 #[test]
 fn gap_fill_rejects_mixed_resolutions() {
     let mut layers = vec![LayerImage::new(8), LayerImage::new(4)];
@@ -332,6 +442,7 @@ fn gap_fill_rejects_mixed_resolutions() {
         border: vec![false; 16],
         far_border: vec![false; 16],
         content: lemi_core::compress::TexelRect::full(4),
+        behind_plane: Vec::new(),
     }];
     assert!(matches!(
         fill_gaps(&mut bad, GapSources::default()),

@@ -59,6 +59,7 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Bundle {
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
+        outline_copies: false,
     };
     let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
     let grid = CellGrid::tile(region, 10.0).unwrap();

@@ -208,6 +208,7 @@ impl<'a> CellRecorder<'a> {
                 .collect(),
             depth: rec.depths,
             frame: None,
+            outline_copies: self.params.outline_copies,
         })
     }
 
@@ -259,6 +260,8 @@ impl<'a> CellRecorder<'a> {
         let res = self.params.resolution;
         let near_field = plan.near_field;
         let recording = Recording::of(self.params.layering);
+        // which side of its layer's plane each texel's point lies on, for the outline copies
+        let outline_copies = self.params.outline_copies && recording.crack_free && !depths_only;
         let face_plan = &plan.faces[slot];
         let face = face_plan.face;
         let placement = &face_plan.placement;
@@ -307,6 +310,7 @@ impl<'a> CellRecorder<'a> {
                         clip_planes: &planes,
                         depth: depths_only,
                         sparse: self.sparse,
+                        side_plane: outline_copies.then_some(placement.layers[k].distance),
                     },
                 )
                 .map_err(|source| RecordError::Gpu {
@@ -333,6 +337,7 @@ impl<'a> CellRecorder<'a> {
             }
             let content = frame.content;
             let image = LayerImage::from_parts_in(res, frame.rgba, border, far_border, content)
+                .and_then(|image| image.with_behind_plane(frame.behind_plane))
                 .map_err(|source| RecordError::Image {
                     cell: cell.id(),
                     face,

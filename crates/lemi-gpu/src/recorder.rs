@@ -90,6 +90,12 @@ pub struct RecordOptions<'a> {
     /// boxes touch (every other texel is known to be empty), and neither draw nor read back
     /// anything for a slab without triangles. `false` reads back the whole layer.
     pub sparse: bool,
+    /// The depth along the face axis of the layer's plane: each covered texel is told whether
+    /// its recorded point lies behind it ([`LayerFrame::behind_plane`]), for the outline copies
+    /// of `lemi_core::compress::copy_outlines`. The shader writes the side into the colour
+    /// target's alpha (1 in front of or on the plane, ½ behind it; the readback makes alpha
+    /// binary again), so it costs no depth readback. `None`: not asked.
+    pub side_plane: Option<f64>,
 }
 
 impl Default for RecordOptions<'_> {
@@ -99,6 +105,7 @@ impl Default for RecordOptions<'_> {
             clip_planes: &[],
             depth: true,
             sparse: true,
+            side_plane: None,
         }
     }
 }
@@ -118,6 +125,9 @@ pub struct LayerFrame {
     /// Every texel outside this rectangle is uncovered: the bounding box of the tiles read back
     /// ([`RecordOptions::sparse`]), the whole layer otherwise.
     pub content: TexelRect,
+    /// Per texel, whether it is covered by a point behind [`RecordOptions::side_plane`]
+    /// (farther from the centre). Empty when the recording did not ask.
+    pub behind_plane: Vec<bool>,
 }
 
 impl LayerFrame {
@@ -385,6 +395,15 @@ impl LayerRecorder {
         // Vertices relative to the centre: the view's eye is the origin of that frame.
         let view = View::cube_face(DVec3::ZERO, face, self.res, near);
         let mut globals = ShadingGlobals::new(&view, lighting, 0.0)?;
+        if let Some(plane) = options.side_plane {
+            if !(plane.is_finite() && plane > 0.0) {
+                return Err(GpuError::Invalid(format!(
+                    "the side plane must be a finite positive depth, got {plane}"
+                )));
+            }
+            // 0 (never a plane's depth) means no side plane in recorder.wgsl
+            globals.depth_axis[3] = plane as f32;
+        }
         globals.params[1] = self.res as f32;
         globals.params[2] = near as f32;
         globals.params[3] = match coverage {
@@ -410,6 +429,11 @@ impl LayerRecorder {
                     Vec::new()
                 },
                 content: TexelRect::empty(),
+                behind_plane: if options.side_plane.is_some() {
+                    vec![false; n]
+                } else {
+                    Vec::new()
+                },
             });
         }
         let rects = if options.sparse {
@@ -467,6 +491,11 @@ impl LayerRecorder {
         // the rectangles were never drawn: already transparent black)
         let mut depth = depth.unwrap_or_default();
         let res = self.res as usize;
+        let mut behind_plane = if options.side_plane.is_some() {
+            vec![false; n]
+        } else {
+            Vec::new()
+        };
         for r in &rects {
             for y in r.y0 as usize..r.y1 as usize {
                 for x in r.x0 as usize..r.x1 as usize {
@@ -478,6 +507,10 @@ impl LayerRecorder {
                             *d = f32::INFINITY;
                         }
                     } else {
+                        // alpha ½ marks a point behind the side plane (recorder.wgsl)
+                        if let Some(b) = behind_plane.get_mut(k) {
+                            *b = px[3] < 192;
+                        }
                         px[3] = 255;
                     }
                 }
@@ -500,6 +533,7 @@ impl LayerRecorder {
             rgba,
             depth,
             content: rects.iter().fold(TexelRect::empty(), |a, r| a.union(r)),
+            behind_plane,
         })
     }
 }

@@ -9,6 +9,8 @@
 // with them, so interior texels get exactly the original interpolation and the overshoot gets the
 // nearest values on the triangle (no extrapolated colours or UVs).
 // Targets as in render.wgsl: 0 = Rgba8UnormSrgb colour, 1 = R32Uint bits of the f32 linear depth.
+// Alpha is 1, or ½ where the texel's point lies behind the side plane at depth globals.depth_axis.w
+// (the layer's plane, for the bake's outline copies; 0: no side plane).
 // Uniforms: globals.params = (alpha cutoff, Res, near plane, coverage mode). Coverage mode 0 is the
 // conservative coverage above; 1 is ordinary rasterization (a texel is covered when its centre is
 // inside the projected triangle, as in render.wgsl), for strategies that record without it
@@ -291,8 +293,12 @@ fn fs_main(in: RecOut) -> FragmentOut {
         discard;
     }
     var out: FragmentOut;
-    out.color = vec4<f32>(shade(albedo.rgb, s.normal), 1.0);
-    out.depth = bitcast<u32>(clamp(in.view_depth, in.tri2.z, in.tri2.w));
+    let depth = clamp(in.view_depth, in.tri2.z, in.tri2.w);
+    // The side plane (globals.depth_axis.w, 0 when none): alpha ½ marks a point behind it.
+    let plane = globals.depth_axis.w;
+    let behind = plane > 0.0 && depth > plane;
+    out.color = vec4<f32>(shade(albedo.rgb, s.normal), select(1.0, 0.5, behind));
+    out.depth = bitcast<u32>(depth);
     // A texel whose centre lies outside the triangle (conservative overshoot) loses the depth test
     // against a triangle that contains the centre at the same depth (the neighbour across a shared
     // edge), so shared edges keep the colour the reference renderer gives them: its reverse-Z depth

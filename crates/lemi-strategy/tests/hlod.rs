@@ -54,6 +54,7 @@ fn params(error_px: f64) -> BakeParams {
             band_factor: 2.0,
         },
         texture_format: Default::default(),
+        outline_copies: false,
     }
 }
 

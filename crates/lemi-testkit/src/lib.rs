@@ -197,6 +197,7 @@ pub fn small_params(resolution: u32, target: LayerTarget) -> BakeParams {
         micro_threshold: 0.6,
         layering: Layering::Optimal,
         texture_format: Default::default(),
+        outline_copies: false,
     }
 }
 

@@ -86,6 +86,7 @@ impl CellLayers {
                 distances,
                 depth: Vec::new(),
                 frame: None,
+                outline_copies: params.outline_copies,
             },
         })
     }
@@ -191,6 +192,7 @@ mod tests {
             micro_threshold: 0.6,
             layering: Default::default(),
             texture_format: Default::default(),
+            outline_copies: false,
         }
     }
 

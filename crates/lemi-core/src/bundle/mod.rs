@@ -157,6 +157,13 @@ pub struct BakeParams {
     /// existing bundles are unchanged). Ignored by HLOD, which has no macro-textures.
     #[serde(default, skip_serializing_if = "TextureFormat::is_png")]
     pub texture_format: TextureFormat,
+    /// Copy every recorded outline texel into the adjacent layer on the side where parallax
+    /// uncovers the strip beside it (`lemi_core::compress::copy_outlines`): no background shows
+    /// through outlines, at the price of copies displayed up to 2α off (bake with α of a third
+    /// of a pixel to keep every pixel within one). Absent in the file: off, so the parameters
+    /// and hash of existing bundles are unchanged. Only the crack-free layerings record it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub outline_copies: bool,
 }
 
 impl BakeParams {
@@ -2344,6 +2351,7 @@ mod tests {
             micro_threshold: 0.5,
             layering: Layering::Optimal,
             texture_format: TextureFormat::Png,
+            outline_copies: false,
         };
         let png = p.hash();
         let json = serde_json::to_string(&p).unwrap();

@@ -28,6 +28,8 @@ pub enum ParamsError {
     MicroThreshold(f64),
     #[error("the equidistant layering's overlap must be a fraction of a slab's depth in [0, 1] (got {0})")]
     Overlap(f64),
+    #[error("outline copies need a crack-free layering (optimal, single or HLOD), not the equidistant one")]
+    OutlineCopies,
     /// An option of the HLOD layering ([`crate::hlod::HlodError::option`] names it).
     #[error(transparent)]
     Hlod(#[from] crate::hlod::HlodError),
@@ -53,6 +55,7 @@ impl ParamsError {
             ParamsError::MicroGrid { .. } => "micro_grid",
             ParamsError::MicroThreshold(_) => "micro_threshold",
             ParamsError::Overlap(_) | ParamsError::Hlod(_) => "layering",
+            ParamsError::OutlineCopies => "outline_copies",
         }
     }
 }
@@ -114,6 +117,9 @@ impl BakeParams {
             if !(overlap.is_finite() && (0.0..=1.0).contains(&overlap)) {
                 return Err(ParamsError::Overlap(overlap));
             }
+            if p.outline_copies {
+                return Err(ParamsError::OutlineCopies);
+            }
         }
         Ok(())
     }
@@ -138,6 +144,7 @@ mod tests {
             micro_threshold: 0.5,
             layering: Layering::Optimal,
             texture_format: Default::default(),
+            outline_copies: false,
         }
     }
 
@@ -222,6 +229,14 @@ mod tests {
                     ..ok()
                 },
                 "layering",
+            ),
+            (
+                BakeParams {
+                    layering: Layering::Equidistant { overlap: 0.1 },
+                    outline_copies: true,
+                    ..ok()
+                },
+                "outline_copies",
             ),
         ];
         for (p, field) in cases {

@@ -291,6 +291,7 @@ mod tests {
             micro_threshold: 0.5,
             layering: Layering::Optimal,
             texture_format: Default::default(),
+            outline_copies: false,
         };
         file.header.params_hash = params.hash();
         let bytes = file.encode().unwrap();

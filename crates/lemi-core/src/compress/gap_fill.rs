@@ -67,6 +67,8 @@ pub struct GapFillStats {
     pub filled: u64,
     /// Copies onto opaque texels (colour replaced by the closer layer's).
     pub overwritten: u64,
+    /// Texels added by [`copy_outlines`] (a separate stage, counted here).
+    pub outline_copies: u64,
 }
 
 impl GapFillStats {
@@ -76,6 +78,7 @@ impl GapFillStats {
         self.source_texels += o.source_texels;
         self.filled += o.filled;
         self.overwritten += o.overwritten;
+        self.outline_copies += o.outline_copies;
     }
 }
 
@@ -227,4 +230,88 @@ pub fn close_near_seam(inner: &mut LayerImage, near: &[u8]) -> u64 {
         }
     }
     added
+}
+
+/// Outline copies: the strips that parallax uncovers beside an outline, closed from the side
+/// where they open.
+///
+/// Conservative recording grows every outline by up to a texel, which covers the strip that an
+/// outline, moved by the parallax the placement allows (up to α), uncovers beside it, but not
+/// always: a sub-texel feature, or an outline whose point lies far from its layer's plane, can
+/// still uncover a pixel of background or of a farther layer ("crack pixels" of the
+/// certificate, a few per `builtin:city:1M` cell at 2048²). This stage copies every outline
+/// texel of a layer (opaque, with a transparent 8-neighbour) into the same texel of *one*
+/// adjacent layer, where that layer is transparent, flagged as a clip-border texel (it hides
+/// nothing):
+/// - into the **farther** layer when the texel's recorded point lies behind its layer's plane
+///   ([`LayerImage::behind_plane`]): drawn on the plane, the point moves with the viewer less
+///   than it should, so its outline uncovers the strip beside it towards which the farther layer
+///   moves; the copy on the farther layer moves further, into that strip;
+/// - into the **nearer** layer when the point lies in front of (or on) its plane: there the
+///   outline moves too far and the nearer layer's copy covers the strip it leaves.
+///
+/// From the reference viewpoint a copy lies exactly behind or in front of its source and is not
+/// seen; from elsewhere it shows beside the source by the two layers' relative shift, which is
+/// at least the point's own parallax against its layer. Its error is at most that shift: 2α
+/// where the placement bounds both layers by α (the bound test in `lemi-bake/tests/no_cracks.rs`).
+///
+/// `layers` nearest first, after gap filling (whose texels are not recorded, so
+/// [`LayerImage::behind_plane`] is `false` for them: a gap-filled texel is copied towards the
+/// nearer layer it came from, where it is opaque, so it adds nothing). A layer without
+/// behind-plane flags sends no copies. Outlines are those of the layers as they come in (a copy
+/// is never copied on). Returns the number of texels added.
+pub fn copy_outlines(layers: &mut [LayerImage]) -> Result<u64, CompressError> {
+    if common_res(layers)?.is_none() || layers.len() < 2 {
+        return Ok(0);
+    }
+    // per layer: its outline texels as (index, colour, into the farther layer)
+    let outlines: Vec<Vec<(usize, [u8; 4], bool)>> = layers
+        .par_iter()
+        .map(|l| {
+            if l.behind_plane.is_empty() {
+                return Vec::new();
+            }
+            let opaque = l.opaque_mask();
+            let inner = all3x3_in(&opaque, l.res, true, &l.content);
+            l.content_rows()
+                .flatten()
+                .filter(|&i| opaque[i] && !inner[i])
+                .map(|i| (i, l.texel(i), l.behind_plane[i]))
+                .collect()
+        })
+        .collect();
+    let contents: Vec<TexelRect> = layers.iter().map(|l| l.content).collect();
+    let n = layers.len();
+    let added: u64 = layers
+        .par_iter_mut()
+        .enumerate()
+        .map(|(m, layer)| {
+            let mut added = 0;
+            // the nearer layer's copies first (sent farther), then the farther layer's (sent
+            // nearer); where both would write a texel, the first one stays
+            let sources = [
+                (m.checked_sub(1), true),
+                ((m + 1 < n).then_some(m + 1), false),
+            ];
+            for (src, into_farther) in sources {
+                let Some(src) = src else { continue };
+                let mut grown = false;
+                for &(i, c, behind) in &outlines[src] {
+                    if behind != into_farther || layer.texel(i)[3] != 0 {
+                        continue;
+                    }
+                    if !grown {
+                        // the copies lie within the source layer's content
+                        layer.include(&contents[src]);
+                        grown = true;
+                    }
+                    layer.set_texel(i, c);
+                    layer.border[i] = true;
+                    added += 1;
+                }
+            }
+            added
+        })
+        .sum();
+    Ok(added)
 }

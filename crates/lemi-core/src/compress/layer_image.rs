@@ -37,6 +37,12 @@ pub struct LayerImage {
     /// their bounding box. The whole image unless said otherwise; a stage that writes a texel
     /// outside it grows it first ([`LayerImage::include`]).
     pub content: TexelRect,
+    /// `res · res` flags, or empty when the recorder was not asked: texel recorded from a point
+    /// *behind* the layer's plane (farther from the view cell than the plane). `false` for a
+    /// texel recorded in front of or on the plane and for a texel not recorded. The side of the
+    /// plane on which parallax uncovers a recorded outline: [`super::gap_fill::copy_outlines`]
+    /// copies it there.
+    pub behind_plane: Vec<bool>,
 }
 
 impl LayerImage {
@@ -49,6 +55,7 @@ impl LayerImage {
             border: vec![false; n],
             far_border: vec![false; n],
             content: TexelRect::full(res),
+            behind_plane: Vec::new(),
         }
     }
 
@@ -66,6 +73,7 @@ impl LayerImage {
             border,
             far_border,
             content: TexelRect::full(res),
+            behind_plane: Vec::new(),
         };
         image.validate()?;
         image.merge_far_border();
@@ -118,11 +126,26 @@ impl LayerImage {
             border,
             far_border,
             content: TexelRect::full(res),
+            behind_plane: Vec::new(),
         };
         image.validate()?;
         image = image.with_content(content);
         image.merge_far_border();
         Ok(image)
+    }
+
+    /// The image with the recorder's [`LayerImage::behind_plane`] flags (`res · res`, or empty).
+    pub fn with_behind_plane(mut self, behind_plane: Vec<bool>) -> Result<Self, CompressError> {
+        if !(behind_plane.is_empty() || behind_plane.len() == self.texel_count()) {
+            return Err(CompressError::Invalid(format!(
+                "layer image of resolution {} has {} behind-plane flags, not {}",
+                self.res,
+                behind_plane.len(),
+                self.texel_count()
+            )));
+        }
+        self.behind_plane = behind_plane;
+        Ok(self)
     }
 
     /// Grows [`LayerImage::content`] to hold `rect` (before writing texels there).
@@ -150,6 +173,13 @@ impl LayerImage {
                 border_len: self.border.len(),
                 far_border_len: self.far_border.len(),
             });
+        }
+        if !(self.behind_plane.is_empty() || self.behind_plane.len() == n) {
+            return Err(CompressError::Invalid(format!(
+                "layer image of resolution {} has {} behind-plane flags, not {n}",
+                self.res,
+                self.behind_plane.len()
+            )));
         }
         Ok(())
     }

@@ -37,7 +37,7 @@ pub use block_compression::{
     BlockQuality, TextureFormat,
 };
 pub use gap_fill::{
-    close_near_seam, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
+    close_near_seam, copy_outlines, fill_gaps, plan_gap_fill, GapFillPlan, GapFillStats, GapSources,
 };
 pub use hidden_texels::{
     remove_hidden_texels, remove_hidden_texels_in_cell, HiddenTexelOptions, HiddenTexelStats,
@@ -103,6 +103,10 @@ pub struct CompressOptions {
     pub gap_fill: bool,
     /// Which texels gap filling copies (default: the clip-edge texels of the far border).
     pub gap_sources: GapSources,
+    /// After gap filling, copy every recorded outline texel into the adjacent layer on the side
+    /// its point lies ([`gap_fill::copy_outlines`]; default `false`). Needs layers recorded with
+    /// [`LayerImage::behind_plane`].
+    pub outline_copies: bool,
     pub hidden: HiddenTexelOptions,
     pub micro: MicroTextureOptions,
     pub packing: PackingOptions,
@@ -113,6 +117,7 @@ impl Default for CompressOptions {
         CompressOptions {
             gap_fill: true,
             gap_sources: GapSources::default(),
+            outline_copies: false,
             hidden: HiddenTexelOptions::default(),
             micro: MicroTextureOptions::default(),
             packing: PackingOptions::default(),
@@ -215,6 +220,12 @@ pub fn compress_face(
     } else {
         Ok(GapFillStats::default())
     };
+    let gaps = gaps.and_then(|mut g| {
+        if options.outline_copies {
+            g.outline_copies = copy_outlines(&mut f.layers)?;
+        }
+        Ok(g)
+    });
     let result = gaps.and_then(|g| {
         let hidden = match options.hidden.cell_half {
             Some(half) => {
