@@ -310,6 +310,7 @@ impl<'a> Baker<'a> {
             raw_bytes: s.layer_bytes,
             opaque_texels_recorded: opaque_recorded,
             opaque_texels_after_gap_fill: s.hidden.opaque_before,
+            outline_copies: s.gap_fill.outline_copies,
             opaque_texels_after_hidden_removal: s.hidden.opaque_after,
             micro_textures: s.micro.micro_textures,
             micro_fill_ratio: s.micro.fill_ratio,

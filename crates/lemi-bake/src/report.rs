@@ -114,6 +114,7 @@ fn add(total: &mut CellStats, s: &CellStats) {
     total.raw_bytes += s.raw_bytes;
     total.opaque_texels_recorded += s.opaque_texels_recorded;
     total.opaque_texels_after_gap_fill += s.opaque_texels_after_gap_fill;
+    total.outline_copies += s.outline_copies;
     total.opaque_texels_after_hidden_removal += s.opaque_texels_after_hidden_removal;
     total.micro_textures += s.micro_textures;
     total.macro_textures += s.macro_textures;

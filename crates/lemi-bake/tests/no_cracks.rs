@@ -54,8 +54,8 @@ use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::clip_border::mark_clip_borders;
 use lemi_core::compress::close_near_seam;
 use lemi_core::compress::{
-    compress_cell, plan_gap_fill, CompressOptions, FaceLayers, GapSources, LayerImage,
-    MacroTexture, MicroTextureOptions,
+    compress_cell, copy_outlines, fill_gaps, plan_gap_fill, CompressOptions, FaceLayers,
+    GapSources, LayerImage, MacroTexture, MicroTextureOptions,
 };
 use lemi_core::layering::place_cell;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
@@ -1585,6 +1585,10 @@ fn explain_cracks() {
 /// conservative recorder the clip-edge rule finds nothing to fill on these scenes (both layers
 /// cover every texel a cut passes through), and `the_clip_edge_gap_rule_opens_no_crack`
 /// confirms that no gap opens without the paper's copies.
+///
+/// Outline copies (`BakeParams::outline_copies`, `copy_outlines`) are held to 2α the same way:
+/// every texel the stage adds shows its source layer's point on the adjacent layer's plane, the
+/// farther one for a point behind its own plane, the nearer one for a point in front of it.
 #[test]
 fn gap_filled_texels_are_displayed_within_alpha() {
     let Some(gpu) = gpu() else { return };
@@ -1608,8 +1612,12 @@ fn gap_filled_texels_are_displayed_within_alpha() {
         ("shell", shell_scene(), &ALL_FACES),
     ];
     let mut paper_worst = 0.0f64;
+    let (mut copies_worst, mut copies) = (0.0f64, 0usize);
     for (name, scene, faces) in scenes {
-        let params = params(faces);
+        let params = BakeParams {
+            outline_copies: true,
+            ..params(faces)
+        };
         let alpha = params.alpha;
         let recorder = CellRecorder::new(&gpu, &scene, params).expect("recorder");
         let plan = recorder.plan(&cell).expect("plan");
@@ -1670,8 +1678,61 @@ fn gap_filled_texels_are_displayed_within_alpha() {
                     }
                 }
             }
+            // the outline copies, after gap filling as in the bake
+            fill_gaps(&mut layers, GapSources::FarClipEdges).expect("gap fill");
+            let before = layers.clone();
+            copy_outlines(&mut layers).expect("outline copies");
+            let (mut worst, mut count) = (0.0f64, 0usize);
+            for (m, layer) in layers.iter().enumerate() {
+                for i in layer.content_rows().flatten() {
+                    if !layer.is_opaque(i) || before[m].is_opaque(i) {
+                        continue;
+                    }
+                    // the source: the nearer layer's point behind its plane, else the farther
+                    // layer's in front of it
+                    let from_nearer = m
+                        .checked_sub(1)
+                        .filter(|&n| before[n].is_opaque(i) && before[n].behind_plane[i]);
+                    let from_farther = (m + 1 < layers.len())
+                        .then_some(m + 1)
+                        .filter(|&f| before[f].is_opaque(i) && !before[f].behind_plane[i]);
+                    let src = from_nearer.or(from_farther).unwrap_or_else(|| {
+                        panic!("{name} {face}: texel {i} of layer {m} added without a source")
+                    });
+                    let d = depth[src].get(i).unwrap_or(f32::NAN) as f64;
+                    assert!(
+                        d.is_finite(),
+                        "{name} {face}: a copy of a texel without a depth"
+                    );
+                    assert_eq!(
+                        d > dist[src],
+                        src < m,
+                        "{name} {face}: copied to the wrong side"
+                    );
+                    let (ti, tj) = ((i % RES as usize) as u32, (i / RES as usize) as u32);
+                    let (s, t) = Face::texel_center(ti, tj, RES);
+                    let truth = cell.center + face.point(s, t, d);
+                    let drawn = cell.center + face.point(s, t, dist[m]);
+                    for &eye in &eyes {
+                        let a = (truth - eye).angle_between(drawn - eye);
+                        worst = worst.max(a / alpha);
+                    }
+                    count += 1;
+                }
+            }
+            println!("{name} {face}: {count} outline copies, worst {worst:.3} α");
+            copies_worst = copies_worst.max(worst);
+            copies += count;
         }
     }
+    assert!(
+        copies > 1000,
+        "only {copies} outline copies: the check proves little"
+    );
+    assert!(
+        copies_worst <= 2.01,
+        "an outline copy is drawn {copies_worst:.3} α from its point"
+    );
     assert!(
         paper_worst > 1.5,
         "the paper's rule should exceed α on these scenes (worst {paper_worst:.3} α)"

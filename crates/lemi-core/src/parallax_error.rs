@@ -509,6 +509,57 @@ mod tests {
         }
     }
 
+    /// With outline copies, a texel with no depth of its own or of the closer layer is credited
+    /// to the farther layer only where that layer's point lies in front of its plane (the points
+    /// copied nearer); without them, or behind the plane, it has no recorded depth.
+    #[test]
+    fn outline_copies_are_credited_to_the_farther_layer_in_front_of_its_plane() {
+        let res = 4;
+        let mut far = TexelDepths::empty(res);
+        far.set(0, 90.0); // in front of the far layer's plane at 100
+        far.set(1, 110.0); // behind it
+        let mut near = TexelDepths::empty(res);
+        near.set(2, 55.0);
+        let mut layers = LayerDepths {
+            center: DVec3::ZERO,
+            res,
+            faces: vec![Face::PosZ],
+            distances: vec![vec![100.0, 50.0]],
+            depth: vec![vec![far, near]],
+            frame: None,
+            outline_copies: false,
+        };
+        let texel = |layer: usize, i: u32| LayerTexel {
+            face_slot: 0,
+            layer,
+            i,
+            j: 0,
+            depth: 50.0,
+            u: i as f64 + 0.5,
+            v: 0.5,
+        };
+        assert_eq!(layers.recorded_depth(&texel(1, 0)), None);
+        layers.outline_copies = true;
+        assert_eq!(layers.recorded_depth(&texel(1, 0)), Some((90.0, true)));
+        assert_eq!(
+            layers.recorded_depth(&texel(1, 1)),
+            None,
+            "behind: never copied nearer"
+        );
+        assert_eq!(
+            layers.recorded_depth(&texel(1, 2)),
+            Some((55.0, false)),
+            "its own"
+        );
+        // the far layer's texel without a depth takes the closer layer's (gap filling)
+        assert_eq!(layers.recorded_depth(&texel(0, 2)), Some((55.0, true)));
+        assert_eq!(
+            layers.recorded_depth(&texel(0, 3)),
+            None,
+            "no farther layer"
+        );
+    }
+
     /// The impostor depth image of the plane z = `big_d` seen by a camera looking along +Z.
     fn plane_depth(view: &View, big_d: f64) -> Vec<f32> {
         vec![big_d as f32; (view.width * view.height) as usize]

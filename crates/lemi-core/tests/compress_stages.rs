@@ -3,9 +3,9 @@
 
 use glam::DVec3;
 use lemi_core::compress::{
-    analyze_micro_textures, copy_outlines, extract_micro_textures, fill_gaps, quad_corners, remove_hidden_texels,
-    CompressError, GapSources, HiddenTexelOptions, LayerImage, MicroTextureOptions, TexelRect,
-    TRANSPARENT,
+    analyze_micro_textures, copy_outlines, extract_micro_textures, fill_gaps, quad_corners,
+    remove_hidden_texels, CompressError, GapSources, HiddenTexelOptions, LayerImage,
+    MicroTextureOptions, TexelRect, TRANSPARENT,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
@@ -421,7 +421,9 @@ fn outline_copies_go_to_the_side_their_point_lies_on() {
 fn outline_copies_need_the_recorders_sides_and_matching_images() {
     let mut layers = vec![square(8, 2, 5, 'a'), square(8, 1, 6, 'b')];
     assert_eq!(copy_outlines(&mut layers).expect("no flags"), 0);
-    assert!(LayerImage::new(8).with_behind_plane(vec![true; 63]).is_err());
+    assert!(LayerImage::new(8)
+        .with_behind_plane(vec![true; 63])
+        .is_err());
     let mut mixed = vec![
         with_sides(square(8, 2, 5, 'a'), &["bbbbbbbb"; 8]),
         LayerImage::new(4),

@@ -440,6 +440,66 @@ fn recording_is_deterministic() {
     assert_eq!(a, b);
 }
 
+/// The side plane ([`RecordOptions::side_plane`]): the shader tells each covered texel whether
+/// its recorded point lies behind the plane, exactly as its read-back depth does, and the colour
+/// is the same as without it (alpha binary again).
+#[test]
+fn the_side_of_the_plane_matches_the_recorded_depth() {
+    let Some(gpu) = gpu() else { return };
+    let rec = LayerRecorder::new(&gpu, 64).expect("recorder");
+    let mats = white_materials(&gpu);
+    let plain = record_wavy(&rec, &mats);
+    let mut depths: Vec<f32> = plain
+        .depth
+        .iter()
+        .copied()
+        .filter(|d| d.is_finite())
+        .collect();
+    depths.sort_by(f32::total_cmp);
+    let plane = depths[depths.len() / 2] as f64;
+    let surface = wavy_surface(Face::PosY, 12);
+    let record = |side_plane: Option<f64>| {
+        rec.record_with(
+            &mats,
+            DVec3::ZERO,
+            Face::PosY,
+            &surface,
+            &all_runs(&surface),
+            0.1,
+            &Lighting::default(),
+            &RecordOptions {
+                side_plane,
+                ..Default::default()
+            },
+        )
+    };
+    let sided = record(Some(plane)).expect("record with a side plane");
+    assert_eq!(sided.rgba, plain.rgba);
+    assert_eq!(sided.depth, plain.depth);
+    assert!(plain.behind_plane.is_empty(), "not asked, not computed");
+    assert_eq!(sided.behind_plane.len(), sided.depth.len());
+    let (mut behind, mut front) = (0, 0);
+    for (k, (&b, &d)) in sided.behind_plane.iter().zip(&sided.depth).enumerate() {
+        assert_eq!(
+            b,
+            d.is_finite() && d > plane as f32,
+            "texel {k} at depth {d}"
+        );
+        if b {
+            behind += 1;
+        } else if d.is_finite() {
+            front += 1;
+        }
+    }
+    assert!(
+        behind > 200 && front > 200,
+        "{behind} behind, {front} in front"
+    );
+    for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(record(Some(bad)).is_err(), "side plane {bad}");
+    }
+}
+
 /// An untextured material is recorded by the pipeline without the texture fetch (the white
 /// texel's sample taken as the constant 1): the layer is texel for texel and depth for depth the
 /// one recorded when the material samples an explicit 1×1 white texture.

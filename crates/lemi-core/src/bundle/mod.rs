@@ -321,6 +321,10 @@ pub struct CellStats {
     pub raw_bytes: u64,
     pub opaque_texels_recorded: u64,
     pub opaque_texels_after_gap_fill: u64,
+    /// Texels the outline copies added ([`BakeParams::outline_copies`]; counted in
+    /// `opaque_texels_after_gap_fill`, absent when none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub outline_copies: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,
