@@ -195,7 +195,7 @@ pub fn run(args: Args) -> Result<()> {
     let index = lemi_eval::write_report(&dir, &run.result, &run.worst)?;
     let verdict = if kind.is_layered() {
         format!(
-            "{}; placement (layers' own texels) max {:.2} px, gap-filled texels max {:.2} px ({:.2} % of impostor pixels)",
+            "{}; placement (layers' own texels) max {:.2} px, gap-filled or copied texels max {:.2} px ({:.2} % of impostor pixels)",
             lemi_eval::verdict(&run.result),
             run.placement.max(),
             run.gap_filled.max(),

@@ -74,7 +74,8 @@ pub struct EvalRun {
     pub worst: Vec<WorstView>,
     /// The error of pixels showing a layer's own texels: the placement's parallax error.
     pub placement: PixelErrorStats,
-    /// The error of pixels showing gap-filled texels (GI 2002 sec. 5.1).
+    /// The error of pixels showing texels filled from an adjacent layer: gap filling (GI 2002
+    /// sec. 5.1) and, when the bake made them, outline copies.
     pub gap_filled: PixelErrorStats,
     /// What the evaluated cells take on disk and in texture memory (layered bundles).
     pub textures: Option<TextureFootprint>,
@@ -213,7 +214,7 @@ impl AgainstAcc {
     }
 }
 
-/// The geometric error split into own and gap-filled texels.
+/// The geometric error split into own and filled (gap-filled or copied) texels.
 struct Breakdown {
     cell: String,
     own: PixelErrorStats,
@@ -224,8 +225,8 @@ impl Breakdown {
     fn describe(&self) -> String {
         let n = (self.own.count() + self.gap.count()).max(1) as f64;
         format!(
-            "layers' own texels: max {:.2} px, p99 {:.2} px over {} pixels; gap-filled texels: \
-             {:.2} % of impostor pixels, max {:.2} px, p99 {:.2} px",
+            "layers' own texels: max {:.2} px, p99 {:.2} px over {} pixels; gap-filled or copied \
+             texels: {:.2} % of impostor pixels, max {:.2} px, p99 {:.2} px",
             self.own.max(),
             self.own.p99(),
             self.own.count(),

@@ -29,7 +29,7 @@ const FOV: f64 = 60.0;
 /// Bakes one 10 m cell of a small city on the avenue with α = `alpha_scale` × the output view's
 /// edge pixel, and evaluates it from the centre and the corners.
 fn bake_and_eval(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> EvalRun {
-    let bundle = bake(gpu, scene, dir, alpha_scale);
+    let bundle = bake(gpu, scene, dir, alpha_scale, false);
     evaluate_bundle(gpu, &bundle, scene, &corner_views(), |_, _, _| {}).unwrap()
 }
 
@@ -43,8 +43,8 @@ fn corner_views() -> EvalOptions {
     }
 }
 
-/// Bakes the cell of [`bake_and_eval`] into `dir`.
-fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Bundle {
+/// Bakes the cell of [`bake_and_eval`] into `dir`, with or without outline copies.
+fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64, outline_copies: bool) -> Bundle {
     let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
     let params = BakeParams {
         cell_size: 10.0,
@@ -59,7 +59,7 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64) -> Bundle {
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
-        outline_copies: false,
+        outline_copies,
     };
     let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
     let grid = CellGrid::tile(region, 10.0).unwrap();
@@ -155,7 +155,7 @@ fn the_silhouette_metric_sees_fattened_silhouettes() {
     let Some(gpu) = gpu() else { return };
     let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
     let tmp = tempfile::tempdir().unwrap();
-    let bundle = bake(&gpu, &scene, tmp.path(), 1.0);
+    let bundle = bake(&gpu, &scene, tmp.path(), 1.0, false);
     let run = |grow: f32| {
         let mut r = Grown {
             gpu: &gpu,
@@ -235,4 +235,46 @@ fn placement_error_stays_within_a_pixel_and_too_few_layers_fail() {
         "too sparse layers must show errors above a pixel, got {}",
         bad.placement.max()
     );
+}
+
+/// Outline copies (`BakeParams::outline_copies`) with α of a third of a pixel: the copies are
+/// made, the certificate measures them (as texels filled from an adjacent layer), and every
+/// pixel, copies included, stays within a pixel of its true position with no crack pixel.
+#[test]
+fn outline_copies_stay_within_a_pixel() {
+    let Some(gpu) = gpu() else { return };
+    let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let eval = |dir: &str, copies: bool| {
+        let bundle = bake(&gpu, &scene, &tmp.path().join(dir), 1.0 / 3.0, copies);
+        let cell = bundle.cell(bundle.manifest().cells[0].id).unwrap();
+        let run = evaluate_bundle(&gpu, &bundle, &scene, &corner_views(), |_, _, _| {}).unwrap();
+        (cell.header.stats.outline_copies, run)
+    };
+    let (none, plain) = eval("plain", false);
+    let (copies, run) = eval("copies", true);
+    let s = &run.result.summary;
+    eprintln!(
+        "α = ⅓ px: without copies {} crack pixels, filled texels {} pixels max {:.3} px; with {copies} \
+         copies: {} crack pixels, own texels max {:.3} px, filled texels {} pixels max {:.3} px, \
+         false coverage {} pixels (without: {})",
+        plain.result.summary.crack_pixels,
+        plain.gap_filled.count(),
+        plain.gap_filled.max(),
+        s.crack_pixels,
+        run.placement.max(),
+        run.gap_filled.count(),
+        run.gap_filled.max(),
+        s.false_coverage_pixels,
+        plain.result.summary.false_coverage_pixels,
+    );
+    assert_eq!(none, 0, "no copies unless asked");
+    assert!(copies > 1000, "{copies} outline copies");
+    assert!(
+        run.gap_filled.count() > plain.gap_filled.count() + 100,
+        "the copies are measured"
+    );
+    assert!(run.placement.max() <= 0.5, "{}", run.placement.max());
+    assert!(run.gap_filled.max() <= 1.0, "{}", run.gap_filled.max());
+    assert_eq!(s.crack_pixels, 0);
 }
