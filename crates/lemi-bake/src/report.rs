@@ -32,6 +32,8 @@ pub struct CellReport {
     pub near_triangles: u64,
     pub submitted_triangles: u64,
     pub opaque_texels_recorded: u64,
+    /// Texels the outline copies added (`BakeParams::outline_copies`).
+    pub outline_copies: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,
@@ -57,6 +59,7 @@ impl CellReport {
             near_triangles: s.near_triangles,
             submitted_triangles: s.submitted_triangles,
             opaque_texels_recorded: s.opaque_texels_recorded,
+            outline_copies: s.outline_copies,
             opaque_texels_after_hidden_removal: s.opaque_texels_after_hidden_removal,
             micro_textures: s.micro_textures,
             micro_fill_ratio: s.micro_fill_ratio,

@@ -587,6 +587,7 @@ pub fn run(args: Args) -> Result<()> {
             "submitted_triangles": total.submitted_triangles,
             "micro_textures": total.micro_textures,
             "macro_textures": total.macro_textures,
+            "outline_copies": total.outline_copies,
             "stage_seconds": total.seconds.iter().cloned().collect::<std::collections::BTreeMap<String, f64>>(),
             "warnings": warnings,
             "per_cell": per_cell,
@@ -632,6 +633,13 @@ pub fn run(args: Args) -> Result<()> {
         total.micro_textures,
         total.macro_textures
     );
+    if params.outline_copies {
+        println!(
+            "copies     per cell: {:.0} outline texels copied into an adjacent layer ({:.1} % of the recorded texels)",
+            total.outline_copies as f64 / n,
+            100.0 * total.outline_copies as f64 / total.opaque_texels_recorded.max(1) as f64
+        );
+    }
     if !matches!(params.layering, Layering::Hlod { .. }) {
         println!(
             "textures   {} per cell: {} on disk, {} in texture memory; encoded in {:.2} s per baked cell",
