@@ -82,6 +82,10 @@ pub struct Args {
     /// Allowed parallax angle α in degrees instead of an output view.
     #[arg(long, allow_hyphen_values = true)]
     pub alpha_deg: Option<f64>,
+    /// α as a fraction of the output view's edge pixel (default 1): e.g. 0.33 with
+    /// --outline-copies, whose copies are drawn up to 2α off.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "alpha_deg")]
+    pub alpha_px: Option<f64>,
     /// Far-field strategy to bake: lemi (optimal layer placement), cubemap (one layer per face),
     /// equidistant (Schaufler's uniformly spaced, overlapping layers) or hlod (the far field as
     /// geometry simplified with meshoptimizer within the same α). warp and dynamic are not
@@ -274,12 +278,18 @@ pub(crate) struct Prepared {
 }
 
 /// α (radians) from `--alpha-deg`, or from the output view `--output-fov`/`--output-width`
-/// (its edge pixel; defaults 60°, 1280 px), with the output view it came from.
+/// (its edge pixel, times `--alpha-px`; defaults 60°, 1280 px, 1), with the output view it came
+/// from.
 pub(crate) fn alpha_of(
     alpha_deg: Option<f64>,
+    alpha_px: Option<f64>,
     output_fov: Option<f64>,
     output_width: Option<u32>,
 ) -> Result<(f64, Option<f64>, Option<u32>)> {
+    let px = alpha_px.unwrap_or(1.0);
+    if !(px.is_finite() && px > 0.0 && px <= 16.0) {
+        bail!("--alpha-px must be a fraction of an output pixel in (0, 16], got {px}");
+    }
     Ok(match alpha_deg {
         Some(a) => {
             if !(a.is_finite() && a > 0.0 && a < 20.0) {
@@ -295,7 +305,7 @@ pub(crate) fn alpha_of(
             }
             let a = alpha_from_output_view(fov.to_radians(), width, PixelChoice::Edge)
                 .context("--output-fov/--output-width")?;
-            (a, Some(fov), Some(width))
+            (a * px, Some(fov), Some(width))
         }
     })
 }
@@ -338,7 +348,12 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         (Some(n), None) => LayerTarget::Layers(n),
         (None, None) => LayerTarget::Layers(64),
     };
-    let (alpha, fov, width) = alpha_of(args.alpha_deg, args.output_fov, args.output_width)?;
+    let (alpha, fov, width) = alpha_of(
+        args.alpha_deg,
+        args.alpha_px,
+        args.output_fov,
+        args.output_width,
+    )?;
     let hlod = matches!(layering, Layering::Hlod { .. });
     let texture_format = texture_format_for(args.texture_format, hlod);
     if hlod && !texture_format.is_png() {
@@ -379,11 +394,14 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         }
     }
 
-    if let (true, Some(f), Some(w)) = (args.outline_copies, fov, width) {
+    let px = args.alpha_px.unwrap_or(1.0);
+    if let (true, Some(f), Some(w), true) = (args.outline_copies, fov, width, px > 0.5) {
         // the copies are drawn up to 2α off: within a pixel needs α ≤ ½ px
         warnings.push(format!(
-            "--outline-copies with α of one pixel of the {w} px, {f}° output view draws copies up              to 2 px off; to keep every pixel within one, give α a third of a pixel:              --alpha-deg {:.5}",
-            (alpha / 3.0).to_degrees()
+            "--outline-copies with α of {px} pixel of the {w} px, {f}° output view draws copies \
+             up to {} px off; to keep every pixel within one, give α a third of a pixel: \
+             --alpha-px 0.33",
+            2.0 * px
         ));
     }
 
@@ -691,5 +709,28 @@ pub fn human(b: f64) -> String {
         format!("{:.0} KB", b / 1e3)
     } else {
         format!("{b:.0} B")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--alpha-px F` is F times the output view's edge pixel, with the view recorded; it is
+    /// checked; `--alpha-deg` records no view.
+    #[test]
+    fn alpha_px_scales_the_output_views_edge_pixel() {
+        let one = alpha_of(None, None, Some(60.0), Some(1280)).expect("one pixel");
+        let third = alpha_of(None, Some(1.0 / 3.0), Some(60.0), Some(1280)).expect("a third");
+        assert!((third.0 * 3.0 - one.0).abs() < 1e-15, "{third:?} {one:?}");
+        assert_eq!((third.1, third.2), (Some(60.0), Some(1280)));
+        let edge = alpha_from_output_view(60f64.to_radians(), 1280, PixelChoice::Edge).unwrap();
+        assert_eq!(one.0, edge);
+        for bad in [0.0, -0.5, f64::NAN, f64::INFINITY, 17.0] {
+            let e = alpha_of(None, Some(bad), None, None).expect_err("bad --alpha-px");
+            assert!(e.to_string().contains("--alpha-px"), "{e}");
+        }
+        let deg = alpha_of(Some(0.02), None, None, None).expect("degrees");
+        assert_eq!((deg.1, deg.2), (None, None));
     }
 }

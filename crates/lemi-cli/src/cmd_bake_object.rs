@@ -356,7 +356,7 @@ fn object_job(
 
 pub fn run(args: Args) -> Result<()> {
     let backend = BackendChoice::parse(&args.backend).context("--backend")?;
-    let (alpha, fov, width) = alpha_of(args.alpha_deg, args.output_fov, args.output_width)?;
+    let (alpha, fov, width) = alpha_of(args.alpha_deg, None, args.output_fov, args.output_width)?;
     if let Some(r) = args.resolution {
         let range = lemi_core::bundle::MIN_RESOLUTION..=lemi_core::bundle::MAX_RESOLUTION;
         if !range.contains(&r) {

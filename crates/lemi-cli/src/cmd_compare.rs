@@ -215,6 +215,7 @@ fn bake(
         output_width: args.output_width,
         alpha_deg: args.alpha_deg,
         outline_copies: false,
+        alpha_px: None,
         micro_grid: 8,
         micro_threshold: 0.6,
         strategy: k.name().into(),

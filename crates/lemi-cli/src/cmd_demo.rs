@@ -97,6 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         output_width: Some(OUT_W),
         alpha_deg: None,
         outline_copies: false,
+        alpha_px: None,
         micro_grid: 8,
         micro_threshold: 0.6,
         strategy: "lemi".into(),

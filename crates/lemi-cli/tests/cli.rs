@@ -594,6 +594,12 @@ fn bake_rejects_absurd_flags_by_name() {
         (vec!["--cells", "99_0_0"], "99_0_0"),
         (vec!["--near-field", "1"], "--near-field"),
         (vec!["--alpha-deg", "nan"], "--alpha-deg"),
+        (vec!["--alpha-px", "0"], "--alpha-px"),
+        (vec!["--alpha-px", "-1"], "--alpha-px"),
+        (
+            vec!["--strategy", "equidistant", "--outline-copies"],
+            "--outline-copies",
+        ),
     ] {
         let mut args = base.to_vec();
         args.extend(extra);
