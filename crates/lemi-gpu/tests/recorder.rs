@@ -417,8 +417,17 @@ fn textured_gouraud_quad_matches_the_reference_renderer() {
 
 /// A wavy surface facing +Y recorded into one 64² layer with `mats` (material 0).
 fn record_wavy(rec: &LayerRecorder, mats: &GpuMaterials) -> LayerFrame {
+    record_wavy_with(rec, mats, &RecordOptions::default()).expect("record")
+}
+
+/// [`record_wavy`] with `options`.
+fn record_wavy_with(
+    rec: &LayerRecorder,
+    mats: &GpuMaterials,
+    options: &RecordOptions,
+) -> Result<LayerFrame, lemi_gpu::GpuError> {
     let surface = wavy_surface(Face::PosY, 12);
-    rec.record(
+    rec.record_with(
         mats,
         DVec3::ZERO,
         Face::PosY,
@@ -426,8 +435,8 @@ fn record_wavy(rec: &LayerRecorder, mats: &GpuMaterials) -> LayerFrame {
         &all_runs(&surface),
         0.1,
         &Lighting::default(),
+        options,
     )
-    .expect("record")
 }
 
 #[test]
@@ -457,21 +466,12 @@ fn the_side_of_the_plane_matches_the_recorded_depth() {
         .collect();
     depths.sort_by(f32::total_cmp);
     let plane = depths[depths.len() / 2] as f64;
-    let surface = wavy_surface(Face::PosY, 12);
     let record = |side_plane: Option<f64>| {
-        rec.record_with(
-            &mats,
-            DVec3::ZERO,
-            Face::PosY,
-            &surface,
-            &all_runs(&surface),
-            0.1,
-            &Lighting::default(),
-            &RecordOptions {
-                side_plane,
-                ..Default::default()
-            },
-        )
+        let options = RecordOptions {
+            side_plane,
+            ..Default::default()
+        };
+        record_wavy_with(&rec, &mats, &options)
     };
     let sided = record(Some(plane)).expect("record with a side plane");
     assert_eq!(sided.rgba, plain.rgba);
