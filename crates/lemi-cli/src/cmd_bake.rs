@@ -112,8 +112,8 @@ pub struct Args {
     /// Copy each layer's outline texels into the adjacent layer on the side where parallax
     /// uncovers the strip beside them (docs/COMPRESSION.md, "Outline copies"): no background or
     /// farther layer shows through an outline from anywhere in the cell, at the price of copies
-    /// drawn up to 2α off. With α of a third of an output pixel (`--alpha-deg`) every pixel
-    /// stays within one. Not with --strategy equidistant.
+    /// drawn up to 2α off. With α of a third of an output pixel (`--alpha-px 0.33`) every
+    /// pixel stays within one. Not with --strategy equidistant.
     #[arg(long)]
     pub outline_copies: bool,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).

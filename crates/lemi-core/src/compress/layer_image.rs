@@ -136,15 +136,8 @@ impl LayerImage {
 
     /// The image with the recorder's [`LayerImage::behind_plane`] flags (`res · res`, or empty).
     pub fn with_behind_plane(mut self, behind_plane: Vec<bool>) -> Result<Self, CompressError> {
-        if !(behind_plane.is_empty() || behind_plane.len() == self.texel_count()) {
-            return Err(CompressError::Invalid(format!(
-                "layer image of resolution {} has {} behind-plane flags, not {}",
-                self.res,
-                behind_plane.len(),
-                self.texel_count()
-            )));
-        }
         self.behind_plane = behind_plane;
+        self.validate()?;
         Ok(self)
     }
 
