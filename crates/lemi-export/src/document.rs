@@ -644,7 +644,17 @@ mod tests {
             t in 1.0e-4f64..10.0,
         ) {
             let tol: Vec<f64> = p.iter().enumerate().map(|(i, _)| t * (1 + i % 3) as f64).collect();
-            let (words, decoded) = exponential_filter(&p, &tol).expect("in range");
+            // a coordinate whose mantissa on its grid needs more than 24 signed bits has no
+            // word: then the filter must decline the whole buffer (the caller stores f32)
+            let fits = p.iter().zip(&tol).all(|(v, &t)| {
+                let step = 2f64.powf((2.0 * t).log2().floor());
+                v.iter().all(|&c| (c as f64 / step).round().abs() < (1 << 23) as f64)
+            });
+            let Some((words, decoded)) = exponential_filter(&p, &tol) else {
+                prop_assert!(!fits, "declined a buffer that fits 24 bits");
+                return Ok(());
+            };
+            prop_assert!(fits, "encoded a buffer that does not fit 24 bits");
             prop_assert_eq!(words.len(), 3 * p.len());
             for (i, v) in p.iter().enumerate() {
                 for c in 0..3 {
@@ -669,6 +679,8 @@ mod tests {
         }
         // 2^30 on a grid of 2^-4: a 34-bit mantissa
         assert!(exponential_filter(&[[1.0e9, 0.0, 0.0]], &[0.05]).is_none());
+        // 9914.671 on a grid of 2^-13: a 27-bit mantissa
+        assert!(exponential_filter(&[[9914.671, 0.0, 0.0]], &[1.0e-4]).is_none());
         assert!(exponential_filter(&[[f32::NAN, 0.0, 0.0]], &[0.05]).is_none());
         assert!(
             exponential_filter(&p, &[0.1, 0.1]).is_none(),
