@@ -74,6 +74,7 @@ pub fn object_bake_params(
         layering: Default::default(),
         texture_format,
         outline_copies: false,
+        outline_fringe: false,
     };
     object_params(setup, layers, &base)
 }

@@ -398,6 +398,7 @@ fn params(faces: &[Face]) -> BakeParams {
         layering: Default::default(),
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     }
 }
 

@@ -380,6 +380,7 @@ fn an_object_impostor_replaces_its_object_in_a_cells_near_field() {
         layering: Default::default(),
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     };
     let probe = scene(vec![ball(DVec3::new(30.0, 3.0, 1.0), 4.0)]);
     let near_field = lemi_bake::Baker::new(&gpu, &probe, env_params.clone())
@@ -478,5 +479,6 @@ fn scene_params() -> BakeParams {
         layering: Default::default(),
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     }
 }

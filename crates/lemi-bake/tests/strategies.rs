@@ -53,6 +53,7 @@ fn params(layering: Layering) -> BakeParams {
         layering,
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     }
 }
 

@@ -116,6 +116,13 @@ pub struct Args {
     /// pixel stays within one. Not with --strategy equidistant.
     #[arg(long)]
     pub outline_copies: bool,
+    /// Mark the texel that conservative recording grows an outline by as fringe, which the
+    /// runtime draws only where something lies behind it (docs/COMPRESSION.md, "Outline
+    /// fringe"): silhouettes against the sky land where the geometry's do instead of up to a
+    /// texel outside, while strips over farther surfaces stay closed. Needs --texture-format bc7,
+    /// uastc or png (BC1's one-bit alpha cannot hold the mark); not with --strategy equidistant.
+    #[arg(long)]
+    pub outline_fringe: bool,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).
     #[arg(long, default_value_t = 8)]
     pub micro_grid: u32,
@@ -177,6 +184,7 @@ fn flag_of(e: &ParamsError) -> &'static str {
         ParamsError::MicroThreshold(_) => "--micro-threshold",
         ParamsError::Overlap(_) => "--overlap",
         ParamsError::OutlineCopies => "--outline-copies",
+        ParamsError::OutlineFringe(_) => "--outline-fringe",
         ParamsError::Hlod(e) => match e.option() {
             "band_factor" => "--hlod-band-factor",
             _ => "--hlod-error-px",
@@ -376,6 +384,7 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
         layering,
         texture_format,
         outline_copies: args.outline_copies,
+        outline_fringe: args.outline_fringe,
     };
     params
         .validate()

@@ -226,6 +226,7 @@ fn bake(
         backend: args.backend.clone(),
         json: true,
         texture_format: format,
+        outline_fringe: false,
     })?;
     let row = lemi_compare::bake(gpu, &prepared.scene, &prepared.job, k)?;
     Ok(BakeRow {

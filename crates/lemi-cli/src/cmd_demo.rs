@@ -108,6 +108,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         backend: args.backend.clone(),
         json: false,
         texture_format: None,
+        outline_fringe: false,
     })?;
 
     // From the corner of the first cell, looking down the avenue.

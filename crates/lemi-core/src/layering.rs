@@ -310,6 +310,7 @@ mod tests {
             layering,
             texture_format: Default::default(),
             outline_copies: false,
+            outline_fringe: false,
         }
     }
 

@@ -60,6 +60,7 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64, outline_copies: 
         layering: Default::default(),
         texture_format: Default::default(),
         outline_copies,
+        outline_fringe: false,
     };
     let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
     bake_cells(gpu, scene, "builtin:city:30k:2", dir, params, region, None)
@@ -330,6 +331,7 @@ fn outline_copies_close_the_slivers_of_a_terrain_cell() {
             layering: Default::default(),
             texture_format: Default::default(),
             outline_copies,
+            outline_fringe: false,
         };
         // the demo's strip; its third cell has the slivers
         let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(45.0, 1.7, 5.0));

@@ -44,6 +44,7 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, format: TextureFormat) -> Bundle {
         layering: Default::default(),
         texture_format: format,
         outline_copies: false,
+        outline_fringe: false,
     };
     let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
     let grid = CellGrid::tile(region, 10.0).unwrap();

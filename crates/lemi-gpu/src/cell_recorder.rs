@@ -27,7 +27,9 @@ use lemi_core::cell::{CellId, ViewCell};
 use lemi_core::classify::{classify_slabs, Classification, TriRef, TriangleBounds};
 use lemi_core::clip::{clip_to_slab, ClipVertex};
 use lemi_core::clip_border::mark_clip_borders;
-use lemi_core::compress::{close_near_seam, CompressError, FaceLayers, LayerImage};
+use lemi_core::compress::{
+    close_near_seam, mark_outline_fringe, CompressError, FaceLayers, LayerImage,
+};
 use lemi_core::layering::{plan_cell, CellPlan, LayeringError};
 use lemi_core::parallax_error::{LayerDepths, TexelDepths};
 use lemi_core::{Face, Scene};
@@ -97,6 +99,8 @@ pub struct RecordedLayers {
     pub opaque_recorded: u64,
     /// Texels added to the innermost layers by [`close_near_seam`].
     pub near_seam_texels: u64,
+    /// Outline texels marked as fringe (`BakeParams::outline_fringe`).
+    pub outline_fringe: u64,
     pub clip_seconds: f64,
 }
 
@@ -110,6 +114,8 @@ pub struct RecordedFace {
     pub opaque_recorded: u64,
     /// Texels added to the innermost layer by [`close_near_seam`].
     pub near_seam_texels: u64,
+    /// Outline texels marked as fringe (`BakeParams::outline_fringe`).
+    pub outline_fringe: u64,
     pub clip_seconds: f64,
 }
 
@@ -229,12 +235,14 @@ impl<'a> CellRecorder<'a> {
             depths: Vec::new(),
             opaque_recorded: 0,
             near_seam_texels: 0,
+            outline_fringe: 0,
             clip_seconds: 0.0,
         };
         for slot in 0..plan.faces.len() {
             let face = self.record_face(cell, plan, class, slot, depths_only, on_layer)?;
             out.opaque_recorded += face.opaque_recorded;
             out.near_seam_texels += face.near_seam_texels;
+            out.outline_fringe += face.outline_fringe;
             out.clip_seconds += face.clip_seconds;
             if depths_only {
                 out.depths.push(face.depths);
@@ -262,6 +270,9 @@ impl<'a> CellRecorder<'a> {
         let recording = Recording::of(self.params.layering);
         // which side of its layer's plane each texel's point lies on, for the outline copies
         let outline_copies = self.params.outline_copies && recording.crack_free && !depths_only;
+        // conservative overshoot marked for the outline fringe, in the depth recording of the
+        // certificate too (the marking changes which triangle wins a texel)
+        let outline_fringe = self.params.outline_fringe && recording.crack_free;
         let face_plan = &plan.faces[slot];
         let face = face_plan.face;
         let placement = &face_plan.placement;
@@ -276,6 +287,7 @@ impl<'a> CellRecorder<'a> {
             depths: Vec::new(),
             opaque_recorded: 0,
             near_seam_texels: 0,
+            outline_fringe: 0,
             clip_seconds: 0.0,
         };
         // clip every slab of this face on the CPU, in parallel (to the depth range the layer
@@ -311,6 +323,7 @@ impl<'a> CellRecorder<'a> {
                         depth: depths_only,
                         sparse: self.sparse,
                         side_plane: outline_copies.then_some(placement.layers[k].distance),
+                        mark_overshoot: outline_fringe,
                     },
                 )
                 .map_err(|source| RecordError::Gpu {
@@ -336,8 +349,15 @@ impl<'a> CellRecorder<'a> {
                 }
             }
             let content = frame.content;
+            let overshoot = frame.overshoot;
             let image = LayerImage::from_parts_in(res, frame.rgba, border, far_border, content)
                 .and_then(|image| image.with_behind_plane(frame.behind_plane))
+                .and_then(|mut image| {
+                    if outline_fringe {
+                        out.outline_fringe += mark_outline_fringe(&mut image, &overshoot)?;
+                    }
+                    Ok(image)
+                })
                 .map_err(|source| RecordError::Image {
                     cell: cell.id(),
                     face,

@@ -96,6 +96,14 @@ pub struct RecordOptions<'a> {
     /// target's alpha (1 in front of or on the plane, ½ behind it; the readback makes alpha
     /// binary again), so it costs no depth readback. `None`: not asked.
     pub side_plane: Option<f64>,
+    /// Tell each covered texel whether its centre lies outside every triangle of the slab that
+    /// covers it (a conservative overshoot, [`LayerFrame::overshoot`]), for the bake's outline
+    /// trimming (`lemi_core::compress::trim_outline_overshoot`). The shader lowers the alpha of
+    /// such a texel by a further ¼ and pushes its depth back so far that a triangle containing the
+    /// centre wins the texel at any depth of the slab, so the winning colour and depth change
+    /// where an overshoot lay in front of a farther triangle: a recording that is trimmed and
+    /// the depth recording of its certificate both mark. `false`: not asked.
+    pub mark_overshoot: bool,
 }
 
 impl Default for RecordOptions<'_> {
@@ -106,6 +114,7 @@ impl Default for RecordOptions<'_> {
             depth: true,
             sparse: true,
             side_plane: None,
+            mark_overshoot: false,
         }
     }
 }
@@ -128,6 +137,9 @@ pub struct LayerFrame {
     /// Per texel, whether it is covered by a point behind [`RecordOptions::side_plane`]
     /// (farther from the centre). Empty when the recording did not ask.
     pub behind_plane: Vec<bool>,
+    /// Per texel, whether it is a conservative overshoot: covered, but its centre inside no
+    /// triangle of the slab ([`RecordOptions::mark_overshoot`]). Empty when not asked.
+    pub overshoot: Vec<bool>,
 }
 
 impl LayerFrame {
@@ -404,6 +416,9 @@ impl LayerRecorder {
             // 0 (never a plane's depth) means no side plane in recorder.wgsl
             globals.depth_axis[3] = plane as f32;
         }
+        if options.mark_overshoot {
+            globals.eye_lo[3] = 1.0;
+        }
         globals.params[1] = self.res as f32;
         globals.params[2] = near as f32;
         globals.params[3] = match coverage {
@@ -430,6 +445,11 @@ impl LayerRecorder {
                 },
                 content: TexelRect::empty(),
                 behind_plane: if options.side_plane.is_some() {
+                    vec![false; n]
+                } else {
+                    Vec::new()
+                },
+                overshoot: if options.mark_overshoot {
                     vec![false; n]
                 } else {
                     Vec::new()
@@ -496,6 +516,11 @@ impl LayerRecorder {
         } else {
             Vec::new()
         };
+        let mut overshoot = if options.mark_overshoot {
+            vec![false; n]
+        } else {
+            Vec::new()
+        };
         for r in &rects {
             for y in r.y0 as usize..r.y1 as usize {
                 for x in r.x0 as usize..r.x1 as usize {
@@ -507,9 +532,14 @@ impl LayerRecorder {
                             *d = f32::INFINITY;
                         }
                     } else {
-                        // alpha ½ marks a point behind the side plane (recorder.wgsl)
+                        // alpha 1 (in front of the side plane) or ½ (behind it), each ¼
+                        // lower for a marked overshoot (recorder.wgsl): 255, 191, 128, 64
+                        let a = px[3];
                         if let Some(b) = behind_plane.get_mut(k) {
-                            *b = px[3] < 192;
+                            *b = a < 160;
+                        }
+                        if let Some(o) = overshoot.get_mut(k) {
+                            *o = (160..224).contains(&a) || a < 96;
                         }
                         px[3] = 255;
                     }
@@ -534,6 +564,7 @@ impl LayerRecorder {
             depth,
             content: rects.iter().fold(TexelRect::empty(), |a, r| a.union(r)),
             behind_plane,
+            overshoot,
         })
     }
 }

@@ -10,7 +10,11 @@
 // nearest values on the triangle (no extrapolated colours or UVs).
 // Targets as in render.wgsl: 0 = Rgba8UnormSrgb colour, 1 = R32Uint bits of the f32 linear depth.
 // Alpha is 1, or ½ where the texel's point lies behind the side plane at depth globals.depth_axis.w
-// (the layer's plane, for the bake's outline copies; 0: no side plane).
+// (the layer's plane, for the bake's outline copies; 0: no side plane). With globals.eye_lo.w = 1
+// (overshoot marked, for the bake's outline trimming) a texel whose centre lies outside its
+// triangle has alpha lowered by a further ¼, and its depth is pushed back far enough (×2^-10 in
+// reverse Z) that a triangle of the slab containing the centre wins the texel at any depth: a
+// texel then reads as overshoot only when no triangle of the slab covers its centre.
 // Uniforms: globals.params = (alpha cutoff, Res, near plane, coverage mode). Coverage mode 0 is the
 // conservative coverage above; 1 is ordinary rasterization (a texel is covered when its centre is
 // inside the projected triangle, as in render.wgsl), for strategies that record without it
@@ -297,14 +301,18 @@ fn fs_main(in: RecOut) -> FragmentOut {
     // The side plane (globals.depth_axis.w, 0 when none): alpha ½ marks a point behind it.
     let plane = globals.depth_axis.w;
     let behind = plane > 0.0 && depth > plane;
-    out.color = vec4<f32>(shade(albedo.rgb, s.normal), select(1.0, 0.5, behind));
+    // (Centre-sampled texels are inside by definition.)
+    let inside = min(min(in.bary.x, in.bary.y), in.bary.z) >= 0.0 || !conservative;
+    let mark = globals.eye_lo.w > 0.5;
+    let over = select(0.0, 0.25, mark && !inside);
+    out.color = vec4<f32>(shade(albedo.rgb, s.normal), select(1.0, 0.5, behind) - over);
     out.depth = bitcast<u32>(depth);
     // A texel whose centre lies outside the triangle (conservative overshoot) loses the depth test
     // against a triangle that contains the centre at the same depth (the neighbour across a shared
     // edge), so shared edges keep the colour the reference renderer gives them: its reverse-Z depth
     // is pushed back by a relative 2^-16.
-    // (Centre-sampled texels are inside by definition.)
-    let inside = min(min(in.bary.x, in.bary.y), in.bary.z) >= 0.0 || !conservative;
-    out.z = select(in.clip.z * (1.0 - 1.0 / 65536.0), in.clip.z, inside);
+    // Marked overshoot (above) is pushed back further: any triangle containing the centre wins.
+    let push = select(1.0 - 1.0 / 65536.0, 1.0 / 1024.0, mark);
+    out.z = select(in.clip.z * push, in.clip.z, inside);
     return out;
 }

@@ -28,6 +28,8 @@ pub(crate) enum PassPart {
     First,
     /// The second of two passes: load, draw, keep colour and view depth.
     Last,
+    /// A pass between the first and the last: load, draw, keep all three targets.
+    Middle,
 }
 
 /// What [`Targets::read_rects`] read: whole images, the texels of the rectangles filled in.
@@ -59,6 +61,11 @@ pub(crate) struct Targets {
     view_depth: wgpu::TextureView,
     view_depth_texture: wgpu::Texture,
     depth: wgpu::TextureView,
+    depth_texture: wgpu::Texture,
+    /// A copy of the depth buffer taken between passes ([`Targets::copy_depth`]), which a later
+    /// pass samples (the impostor renderer's outline fringe pass).
+    depth_copy_texture: wgpu::Texture,
+    depth_copy: wgpu::TextureView,
     color_readback: wgpu::Buffer,
     depth_readback: wgpu::Buffer,
 }
@@ -104,7 +111,13 @@ impl Targets {
         let depth = tex(
             "depth",
             DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            &[],
+        );
+        let depth_copy_texture = tex(
+            "depth copy",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::TEXTURE_BINDING,
             &[],
         );
         Targets {
@@ -123,6 +136,9 @@ impl Targets {
             view_depth: view_depth_texture.create_view(&Default::default()),
             view_depth_texture,
             depth: depth.create_view(&Default::default()),
+            depth_texture: depth,
+            depth_copy: depth_copy_texture.create_view(&Default::default()),
+            depth_copy_texture,
             color_readback: readback("colour"),
             depth_readback: readback("view depth"),
         }
@@ -175,17 +191,18 @@ impl Targets {
         timed: bool,
         view_depth: bool,
     ) -> wgpu::RenderPass<'e> {
+        // (PassPart::Middle is neither)
         let first = matches!(part, PassPart::Whole | PassPart::First);
         let last = matches!(part, PassPart::Whole | PassPart::Last);
-        let timestamp_writes =
-            self.timer
-                .as_ref()
-                .filter(|_| timed)
-                .map(|t| wgpu::RenderPassTimestampWrites {
-                    query_set: &t.queries,
-                    beginning_of_pass_write_index: first.then_some(0),
-                    end_of_pass_write_index: last.then_some(1),
-                });
+        let timestamp_writes = self
+            .timer
+            .as_ref()
+            .filter(|_| timed && (first || last))
+            .map(|t| wgpu::RenderPassTimestampWrites {
+                query_set: &t.queries,
+                beginning_of_pass_write_index: first.then_some(0),
+                end_of_pass_write_index: last.then_some(1),
+            });
         let color_ops = wgpu::Operations {
             load: if first {
                 wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)
@@ -234,6 +251,23 @@ impl Targets {
             occlusion_query_set: None,
             multiview_mask: None,
         })
+    }
+
+    /// Copies the depth buffer (as the last pass stored it: [`PassPart::First`] or
+    /// [`PassPart::Middle`]) into the texture [`Targets::depth_copy`] views, for a later pass to
+    /// sample.
+    pub(crate) fn copy_depth(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.copy_texture_to_texture(
+            self.depth_texture.as_image_copy(),
+            self.depth_copy_texture.as_image_copy(),
+            self.depth_texture.size(),
+        );
+    }
+
+    /// The copy of the depth buffer [`Targets::copy_depth`] writes (reverse-Z: 0 where nothing
+    /// was drawn).
+    pub(crate) fn depth_copy(&self) -> &wgpu::TextureView {
+        &self.depth_copy
     }
 
     /// Copies colour and view depth into the readback buffers (after the pass).

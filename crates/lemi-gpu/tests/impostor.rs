@@ -91,7 +91,8 @@ fn cell_of(i: u32, lo: f64, hi: f64, n: u32) -> Option<u32> {
 }
 
 /// The 4×4 test image: distinct colours, texel (1, 2) transparent, (2, 1) alpha 127 (discarded),
-/// (3, 3) alpha 128 (kept).
+/// (0, 0) alpha 128 (outline fringe: not drawn over the background), (3, 3) alpha 192 (drawn
+/// everywhere).
 fn test_image(x: u32, y: u32) -> [u8; 4] {
     let rgb = [
         (10 + 60 * x) as u8,
@@ -101,7 +102,8 @@ fn test_image(x: u32, y: u32) -> [u8; 4] {
     let a = match (x, y) {
         (1, 2) => 0,
         (2, 1) => 127,
-        (3, 3) => 128,
+        (0, 0) => 128,
+        (3, 3) => 192,
         _ => 255,
     };
     [rgb[0], rgb[1], rgb[2], a]
@@ -112,7 +114,8 @@ fn drawn(c: [u8; 4]) -> [u8; 4] {
 }
 
 /// Checks that the frame shows `image(x, y)` (a `w × h` image) over pixels `[px0, px1] × [py0,
-/// py1]`, texels with alpha < 128 show `clear`; returns how many pixels were checked.
+/// py1]`, texels with alpha < 192 (transparent or outline fringe, over nothing) show `clear`;
+/// returns how many pixels were checked.
 fn check_image(
     f: &Frame,
     [px0, px1, py0, py1]: [f64; 4],
@@ -130,7 +133,7 @@ fn check_image(
             let texel = image(tx, ty);
             let got = f.pixel(px, py).unwrap_or_default();
             let d = f.depth_at(px, py).unwrap_or(0.0);
-            if texel[3] >= 128 {
+            if texel[3] >= 192 {
                 assert_eq!(got, drawn(texel), "pixel {px},{py} = texel {tx},{ty}");
                 assert!(
                     ((d - depth) / depth).abs() < 1e-3,
@@ -187,10 +190,10 @@ fn quad_shows_its_texels_exactly() {
         assert_eq!(f.pixel(x, y), Some(clear), "background at {x},{y}");
         assert_eq!(f.depth_at(x, y), Some(f32::INFINITY));
     }
-    // 26 x 26 pixels, minus the transparent and alpha-127 texels.
+    // 26 x 26 pixels, minus the transparent, alpha-127 and fringe texels.
     let hidden = f.rgba.chunks_exact(4).filter(|p| *p == clear).count();
     assert_eq!(f.covered_count() + hidden, 64 * 64);
-    assert!(f.covered_count() < 26 * 26 && f.covered_count() > 26 * 26 - 2 * 49);
+    assert!(f.covered_count() < 26 * 26 - 2 * 36 && f.covered_count() > 26 * 26 - 3 * 49);
     // Same image from render_impostors_only (there is no near geometry) and on a second call.
     let g = r
         .render_impostors_only(&cell, &camera().view(), &opts)
@@ -825,4 +828,75 @@ fn bad_input_is_an_error() {
     // A near list naming a mesh whose material was not uploaded.
     let few = Arc::new(GpuMaterials::upload(&gpu, &scene.materials[1..], &[]).expect("one"));
     assert!(ImpostorCell::upload(&gpu, few, &scene, &[[1, 0]], &[], &[]).is_err());
+}
+
+/// Outline fringe texels (alpha between the two alpha tests) are drawn only over a pixel where
+/// something was drawn before them: over a farther quad they show (with their own colour and
+/// depth), over the background they do not. In RGBA8 and BC7, which keep the third alpha level;
+/// BC1's one-bit alpha loses the mark, and its fringe is drawn everywhere, as conservative
+/// recording made it.
+#[test]
+fn fringe_texels_show_only_over_something_drawn() {
+    let Some(gpu) = gpu() else { return };
+    let back_colour = [0, 255, 0, 255];
+    let fringe = [255, 0, 0, lemi_core::compress::FRINGE_ALPHA];
+    // the back quad: [-8, 0] × [-8, 8] at distance 8, the left half of the view
+    let mut macros = vec![filled(4, 4, back_colour)];
+    // the front quad: 8×4 texels on [-2, 2] × [-1, 1] at distance 5 (pixels 19.2 ..= 44.8
+    // across, 3.2 px a texel), all fringe but one fully opaque texel column at its right edge
+    let mut front = filled(8, 4, fringe);
+    for y in 0..4 {
+        put(&mut front, 7, y, [0, 0, 255, 255]);
+    }
+    macros.push(front);
+    let quads = [
+        quad(0, 0, [0, 0, 4, 4], [-8.0, 0.0, -8.0, 8.0, -8.0], [0.0; 3]),
+        quad(1, 1, [0, 0, 8, 4], [-2.0, 2.0, -1.0, 1.0, -5.0], [0.0; 3]),
+    ];
+    let r = ImpostorRenderer::new(&gpu).expect("renderer");
+    let clear = [7, 8, 9, 10];
+    let opts = RenderOptions {
+        clear,
+        ..Default::default()
+    };
+    for (name, cell) in cells_in_formats(&gpu, &quads, &macros) {
+        let f = r.render(&cell, &camera().view(), &opts).expect("render");
+        let keeps_mark = name != "BC1";
+        // over the back quad (x < 32): the fringe, at the front quad's depth
+        for x in [22, 26, 29] {
+            let got = f.pixel(x, 32).unwrap_or_default();
+            assert_eq!(
+                got,
+                drawn(fringe),
+                "{name}: fringe over the back quad at {x}"
+            );
+            let d = f.depth_at(x, 32).unwrap_or(0.0);
+            assert!((d - 5.0).abs() < 1e-3, "{name}: depth {d} at {x}");
+        }
+        // over the background (32 ≤ x < 41.6): nothing, unless the format lost the mark
+        for x in [34, 37, 40] {
+            let got = f.pixel(x, 32).unwrap_or_default();
+            if keeps_mark {
+                assert_eq!(got, clear, "{name}: fringe over the background at {x}");
+                assert_eq!(f.depth_at(x, 32), Some(f32::INFINITY));
+            } else {
+                assert_eq!(got, drawn(fringe), "{name}: BC1 draws the fringe at {x}");
+            }
+        }
+        // the opaque column over the background is drawn in every format
+        let d = f.depth_at(43, 32).unwrap_or(0.0);
+        assert!(
+            (d - 5.0).abs() < 1e-3,
+            "{name}: the opaque column, depth {d}"
+        );
+        // the back quad beside the front one, and the background beyond both
+        assert_eq!(f.pixel(10, 32), Some(back_colour), "{name}");
+        assert_eq!(f.pixel(50, 32), Some(clear), "{name}");
+        // the fringe pass draws again only the draw calls with fringe texels
+        assert_eq!(
+            r.last_quad_draws().0,
+            3,
+            "{name}: two draw calls and one fringe draw"
+        );
+    }
 }

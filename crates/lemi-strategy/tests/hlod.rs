@@ -55,6 +55,7 @@ fn params(error_px: f64) -> BakeParams {
         },
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     }
 }
 

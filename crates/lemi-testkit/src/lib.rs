@@ -198,6 +198,7 @@ pub fn small_params(resolution: u32, target: LayerTarget) -> BakeParams {
         layering: Layering::Optimal,
         texture_format: Default::default(),
         outline_copies: false,
+        outline_fringe: false,
     }
 }
 

@@ -193,6 +193,7 @@ mod tests {
             layering: Default::default(),
             texture_format: Default::default(),
             outline_copies: false,
+            outline_fringe: false,
         }
     }
 

@@ -76,6 +76,14 @@ pub fn version_for(params: &BakeParams) -> u32 {
 /// drawn. Macro-texels are baked with alpha 0 or 255 and every texture format keeps each texel on
 /// its side of it; the runtime's quad shader and the glTF export (`alphaCutoff`) both use it.
 pub const QUAD_ALPHA_CUTOFF: f32 = 0.5;
+/// The runtime's first alpha test: a macro-texel with alpha (0..=1) at or above this is drawn
+/// wherever it lies; one between [`QUAD_ALPHA_CUTOFF`] and this is an outline *fringe* texel
+/// (`BakeParams::outline_fringe`, [`crate::compress::outline_fringe`]), drawn only over a pixel
+/// where something was drawn before it. (`crate::compress::FULL_ALPHA` / 255 passes it,
+/// `FULL_ALPHA − 1` does not.) Bundles without fringe texels have alpha 0 or 1 only, for which
+/// both tests agree; a renderer that knows only [`QUAD_ALPHA_CUTOFF`] (the glTF export) draws
+/// fringe texels everywhere, as conservative recording made them.
+pub const QUAD_FULL_ALPHA: f32 = 0.75;
 /// How far (in texels of its layer) every quad is grown beyond its texel rectangle when drawn, so
 /// that neighbouring quads overlap instead of meeting edge to edge: without it, pixels whose centre
 /// falls exactly on a shared edge, a T-junction or a cube-face seam are covered by neither quad
@@ -164,6 +172,14 @@ pub struct BakeParams {
     /// and hash of existing bundles are unchanged. Only the crack-free layerings record it.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub outline_copies: bool,
+    /// Mark the conservative overshoot of outlines as fringe texels, which the runtime draws only
+    /// where something lies behind them (`lemi_core::compress::outline_fringe`): silhouettes
+    /// against the sky land where the geometry's do instead of a texel outside. The recording
+    /// then lets a triangle containing a texel's centre win that texel over an overshoot at any
+    /// depth. Absent in the file: off. Only the crack-free layerings, and texture formats with a
+    /// third alpha level, record it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub outline_fringe: bool,
 }
 
 impl BakeParams {
@@ -2356,6 +2372,7 @@ mod tests {
             layering: Layering::Optimal,
             texture_format: TextureFormat::Png,
             outline_copies: false,
+            outline_fringe: false,
         };
         let png = p.hash();
         let json = serde_json::to_string(&p).unwrap();

@@ -30,6 +30,8 @@ pub enum ParamsError {
     Overlap(f64),
     #[error("outline copies need a crack-free layering (optimal, single or HLOD), not the equidistant one")]
     OutlineCopies,
+    #[error("the outline fringe needs {0}")]
+    OutlineFringe(&'static str),
     /// An option of the HLOD layering ([`crate::hlod::HlodError::option`] names it).
     #[error(transparent)]
     Hlod(#[from] crate::hlod::HlodError),
@@ -56,6 +58,7 @@ impl ParamsError {
             ParamsError::MicroThreshold(_) => "micro_threshold",
             ParamsError::Overlap(_) | ParamsError::Hlod(_) => "layering",
             ParamsError::OutlineCopies => "outline_copies",
+            ParamsError::OutlineFringe(_) => "outline_fringe",
         }
     }
 }
@@ -120,6 +123,17 @@ impl BakeParams {
             if p.outline_copies {
                 return Err(ParamsError::OutlineCopies);
             }
+            if p.outline_fringe {
+                return Err(ParamsError::OutlineFringe(
+                    "a crack-free layering (optimal, single or HLOD), not the equidistant one",
+                ));
+            }
+        }
+        if p.outline_fringe && !p.texture_format.keeps_fringe() {
+            return Err(ParamsError::OutlineFringe(
+                "a texture format with a third alpha level (bc7, uastc or png): BC1's one-bit \
+                 alpha loses its mark",
+            ));
         }
         Ok(())
     }
@@ -145,6 +159,7 @@ mod tests {
             layering: Layering::Optimal,
             texture_format: Default::default(),
             outline_copies: false,
+            outline_fringe: false,
         }
     }
 
@@ -237,6 +252,22 @@ mod tests {
                     ..ok()
                 },
                 "outline_copies",
+            ),
+            (
+                BakeParams {
+                    layering: Layering::Equidistant { overlap: 0.1 },
+                    outline_fringe: true,
+                    ..ok()
+                },
+                "outline_fringe",
+            ),
+            (
+                BakeParams {
+                    outline_fringe: true,
+                    texture_format: crate::compress::TextureFormat::Bc1,
+                    ..ok()
+                },
+                "outline_fringe",
             ),
         ];
         for (p, field) in cases {

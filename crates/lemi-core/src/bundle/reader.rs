@@ -292,6 +292,7 @@ mod tests {
             layering: Layering::Optimal,
             texture_format: Default::default(),
             outline_copies: false,
+            outline_fringe: false,
         };
         file.header.params_hash = params.hash();
         let bytes = file.encode().unwrap();

@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::basis_universal::BasisFormat;
+use super::layer_image::{FRINGE_ALPHA, FULL_ALPHA};
 use super::CompressError;
 
 /// How a bundle stores its macro-textures (`lemi bake --texture-format`).
@@ -54,6 +55,16 @@ impl TextureFormat {
         TextureFormat::Etc1s,
         TextureFormat::Uastc,
     ];
+
+    /// Whether the format keeps a third alpha level between transparent and fully opaque, the
+    /// mark of the outline fringe ([`super::outline_fringe`]): PNG exactly, BC7 and UASTC within
+    /// their alpha error; BC1's one-bit alpha (and ETC1S, transcoded to it) does not.
+    pub fn keeps_fringe(self) -> bool {
+        matches!(
+            self,
+            TextureFormat::Png | TextureFormat::Bc7 | TextureFormat::Uastc
+        )
+    }
 
     /// The name used on the command line and in JSON.
     pub fn name(self) -> &'static str {
@@ -188,8 +199,32 @@ fn opaque(p: &[u8; 4]) -> bool {
     p[3] >= 128
 }
 
-/// The block as the encoders get it: binary alpha, transparent texels in the mean opaque colour.
-fn prepare_block(px: &mut [[u8; 4]; 16]) {
+/// The alpha level of a texel: 0 transparent, 1 outline fringe ([`super::outline_fringe`]), 2
+/// fully opaque.
+fn alpha_level(p: &[u8; 4]) -> u8 {
+    u8::from(p[3] >= 128) + u8::from(p[3] >= FULL_ALPHA)
+}
+
+/// Whether `format` keeps the fringe level of alpha (BC7 does; BC1's one-bit alpha does not).
+fn keeps_fringe(format: BlockFormat) -> bool {
+    format == BlockFormat::Bc7
+}
+
+/// Whether `decoded` shows every texel of `px` on its alpha level as `format` keeps them.
+fn same_alpha(format: BlockFormat, px: &[[u8; 4]; 16], decoded: &[[u8; 4]; 16]) -> bool {
+    if keeps_fringe(format) {
+        px.iter()
+            .zip(decoded)
+            .all(|(a, b)| alpha_level(a) == alpha_level(b))
+    } else {
+        px.iter().zip(decoded).all(|(a, b)| opaque(a) == opaque(b))
+    }
+}
+
+/// The block as the encoders get it: alpha 255 for opaque texels ([`FRINGE_ALPHA`] for outline
+/// fringe texels where `fringe`, else 255 for them too), transparent texels in the mean opaque
+/// colour with alpha 0.
+fn prepare_block(px: &mut [[u8; 4]; 16], fringe: bool) {
     let (mut sum, mut n) = ([0u32; 3], 0u32);
     for p in px.iter().filter(|p| opaque(p)) {
         for c in 0..3 {
@@ -204,15 +239,20 @@ fn prepare_block(px: &mut [[u8; 4]; 16]) {
     };
     for p in px.iter_mut() {
         if opaque(p) {
-            p[3] = 255;
+            p[3] = if fringe && alpha_level(p) == 1 {
+                FRINGE_ALPHA
+            } else {
+                255
+            };
         } else {
             *p = [mean[0], mean[1], mean[2], 0];
         }
     }
 }
 
-/// The image as block encoders get it ([`prepare_block`] over every 4×4 block): binary alpha,
-/// transparent texels in the mean colour of their block's opaque texels.
+/// The image as block encoders get it ([`prepare_block`] over every 4×4 block): alpha 0, 255 or
+/// (outline fringe) [`FRINGE_ALPHA`], transparent texels in the mean colour of their block's
+/// opaque texels.
 pub fn prepare_image(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, CompressError> {
     check_image(width, height, rgba)?;
     let mut out = rgba.to_vec();
@@ -220,7 +260,7 @@ pub fn prepare_image(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, Co
     for by in 0..height.div_ceil(BLOCK) {
         for bx in 0..width.div_ceil(BLOCK) {
             let mut px = read_block(rgba, width, height, bx, by);
-            prepare_block(&mut px);
+            prepare_block(&mut px, true);
             for (i, p) in px.iter().enumerate() {
                 let (x, y) = (bx * BLOCK + i as u32 % BLOCK, by * BLOCK + i as u32 / BLOCK);
                 if x < width && y < height {
@@ -244,7 +284,8 @@ fn check_image(width: u32, height: u32, rgba: &[u8]) -> Result<(), CompressError
 }
 
 /// Encodes a `width × height` RGBA8 image (row-major, row 0 first) into `format`, blocks
-/// row-major. Every texel decodes to an alpha on the same side of 128 as its source.
+/// row-major. Every texel decodes to an alpha on the same side of 128 as its source, and in BC7
+/// on the same alpha level (transparent, outline fringe, fully opaque).
 pub fn encode_blocks(
     format: BlockFormat,
     width: u32,
@@ -263,7 +304,7 @@ pub fn encode_blocks(
             let blocks: Vec<[[u8; 4]; 16]> = (0..bw)
                 .map(|bx| {
                     let mut px = read_block(rgba, width, height, bx, by);
-                    prepare_block(&mut px);
+                    prepare_block(&mut px, keeps_fringe(format));
                     px
                 })
                 .collect();
@@ -284,12 +325,12 @@ pub fn encode_blocks(
 }
 
 /// Encodes one row of prepared blocks with the format's encoder.
-/// Keeps the alpha test exact: when `block` decodes with a texel's alpha on the other side of 128
-/// than in `px` (binary alpha, as [`prepare_block`] leaves it), replaces it with an exact-alpha
+/// Keeps the alpha tests exact: when `block` decodes with a texel's alpha on another level than
+/// in `px` (as [`prepare_block`] leaves it; [`same_alpha`]), replaces it with an exact-alpha
 /// encoding of `px` (BC7 mode 5, BC1's three-colour mode); says whether it did.
 fn fix_alpha(format: BlockFormat, px: &[[u8; 4]; 16], block: &mut [u8]) -> bool {
     let decoded = format.decode_block(block);
-    if px.iter().zip(&decoded).all(|(a, b)| opaque(a) == opaque(b)) {
+    if same_alpha(format, px, &decoded) {
         return false;
     }
     match format {
@@ -326,7 +367,7 @@ pub fn make_alpha_exact(
             let mut fixed = 0;
             for (bx, block) in row.chunks_exact_mut(bb).enumerate() {
                 let mut px = read_block(rgba, width, height, bx as u32, by as u32);
-                prepare_block(&mut px);
+                prepare_block(&mut px, keeps_fringe(format));
                 fixed += fix_alpha(format, &px, block) as u64;
             }
             fixed
@@ -505,18 +546,14 @@ pub(crate) fn bc7_mode5_block(px: &[[u8; 4]; 16]) -> [u8; 16] {
         std::mem::swap(&mut e0, &mut e1);
         ci.iter_mut().for_each(|i| *i = 3 - *i);
     }
+    // alpha from 255 to 0 (or 0 to 255) in four steps: 255, 171, 84, 0; an outline fringe texel
+    // takes 171 (between the two alpha tests), and the anchor texel's index stays below 2
     let (a0, a1, ai): (u32, u32, Vec<u32>) = if opaque(&px[0]) {
-        (
-            255,
-            0,
-            px.iter().map(|p| if opaque(p) { 0 } else { 3 }).collect(),
-        )
+        let index = |p: &[u8; 4]| [3, 1, 0][alpha_level(p) as usize];
+        (255, 0, px.iter().map(index).collect())
     } else {
-        (
-            0,
-            255,
-            px.iter().map(|p| if opaque(p) { 3 } else { 0 }).collect(),
-        )
+        let index = |p: &[u8; 4]| [0, 2, 3][alpha_level(p) as usize];
+        (0, 255, px.iter().map(index).collect())
     };
     let mut b = Bits { value: 0, len: 0 };
     b.put(1 << 5, 6); // mode 5
@@ -607,7 +644,7 @@ mod tests {
                 let disc = dx * dx + dy * dy < (w.min(h) as f32 / 4.0).powi(2);
                 let on = disc ^ ((x + 2 * y) % 11 < 3) ^ (rnd() % 17 == 0);
                 a.push(match (on, rnd() % 3) {
-                    (true, 0) => 128,
+                    (true, 0) => FULL_ALPHA,
                     (true, _) => 255,
                     (false, 0) => 127,
                     (false, _) => 0,
@@ -726,6 +763,43 @@ mod tests {
         }
     }
 
+    /// Outline fringe texels (alpha between the two alpha tests) stay fringe in BC7, from the
+    /// encoder or from the exact mode-5 block, next to transparent and fully opaque texels in any
+    /// mix; BC1 keeps only the first alpha test (fringe texels decode opaque).
+    #[test]
+    fn bc7_keeps_the_fringe_level_bc1_the_alpha_test() {
+        for seed in 0..100u32 {
+            let (w, h) = (12, 8);
+            let mut img = gradient_image(w, h, seed);
+            for (i, p) in img.chunks_exact_mut(4).enumerate() {
+                let r = (i as u32)
+                    .wrapping_mul(2_654_435_761)
+                    .wrapping_add(seed * 97)
+                    >> 29;
+                p[3] = [0, FRINGE_ALPHA, 255, FRINGE_ALPHA, 255, 255, 0, 200][r as usize];
+            }
+            for f in [BlockFormat::Bc7, BlockFormat::Bc1] {
+                let (blocks, _) = encode_blocks(f, w, h, &img).expect("encode");
+                let dec = decode_blocks(f, w, h, &blocks).expect("decode");
+                for (a, b) in img.chunks_exact(4).zip(dec.chunks_exact(4)) {
+                    let (a, b) = ([a[0], a[1], a[2], a[3]], [b[0], b[1], b[2], b[3]]);
+                    if f == BlockFormat::Bc7 {
+                        assert_eq!(alpha_level(&a), alpha_level(&b), "{seed}: {a:?} {b:?}");
+                    } else {
+                        assert_eq!(opaque(&a), opaque(&b), "{seed}: {a:?} {b:?}");
+                    }
+                }
+            }
+            let mut px = read_block(&img, w, h, 1, 1);
+            prepare_block(&mut px, true);
+            let dec = BlockFormat::Bc7.decode_block(&bc7_mode5_block(&px));
+            assert!(px
+                .iter()
+                .zip(&dec)
+                .all(|(a, b)| alpha_level(a) == alpha_level(b)));
+        }
+    }
+
     #[test]
     fn the_exact_alpha_blocks_decode_with_exact_alpha() {
         for seed in 0..200u32 {
@@ -735,7 +809,7 @@ mod tests {
                 two_colour_image(4, 4, seed)
             };
             let mut px = read_block(&img, 4, 4, 0, 0);
-            prepare_block(&mut px);
+            prepare_block(&mut px, false);
             for (format, block) in [
                 (BlockFormat::Bc7, bc7_mode5_block(&px).to_vec()),
                 (BlockFormat::Bc1, bc1_three_colour_block(&px).to_vec()),
@@ -766,7 +840,7 @@ mod tests {
         // the verification in encode_blocks replaces exactly such blocks
         let img = two_colour_image(4, 4, 7);
         let mut px = read_block(&img, 4, 4, 0, 0);
-        prepare_block(&mut px);
+        prepare_block(&mut px, false);
         assert!(px.iter().any(|p| !opaque(p)) && px.iter().any(opaque));
         let mut wrong = [0u8; 16];
         let solid = vec![[10u8, 20, 30, 255]; 16];

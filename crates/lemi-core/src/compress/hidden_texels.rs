@@ -59,7 +59,7 @@ use rayon::prelude::*;
 
 use glam::DVec3;
 
-use super::layer_image::{common_res, LayerImage, OPAQUE_ALPHA, TRANSPARENT};
+use super::layer_image::{common_res, LayerImage, FULL_ALPHA, TRANSPARENT};
 use super::CompressError;
 use super::TexelRect;
 use crate::face::Face;
@@ -295,7 +295,7 @@ fn remove(
             cap,
             |i| {
                 hidden[i]
-                    || (layer.rgba[4 * i + 3] >= OPAQUE_ALPHA
+                    || (layer.rgba[4 * i + 3] >= FULL_ALPHA
                         && (options.clip_border_occludes || !layer.border[i]))
             },
             &mut half_run,

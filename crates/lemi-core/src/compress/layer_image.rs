@@ -5,13 +5,24 @@
 //! texels of a polygon's clipping edge are recorded in both adjacent layers: the *clip-border*
 //! texels carried in [`LayerImage::border`]).
 //!
-//! Alpha is binary: a texel is opaque when its alpha is at least [`OPAQUE_ALPHA`]. Texels are
+//! A texel is opaque when its alpha is at least [`OPAQUE_ALPHA`]; the recorder writes 0 or 255,
+//! and the outline fringe ([`super::outline_fringe`]) marks opaque texels that may be left undrawn
+//! with [`FRINGE_ALPHA`], below [`FULL_ALPHA`]. Texels are
 //! stored row-major, row 0 at the top of the face image (the convention of [`crate::face`]).
 
 use super::{CompressError, TexelRect};
 
 /// Smallest alpha value that counts as opaque (the recorder writes 0 or 255).
 pub const OPAQUE_ALPHA: u8 = 128;
+
+/// The alpha of a fringe texel ([`super::outline_fringe`]): opaque, but below [`FULL_ALPHA`]. Half
+/// way between the two thresholds, so that a block format's alpha error (BC7 interpolates alpha
+/// in steps of at most 37) keeps it in its band.
+pub const FRINGE_ALPHA: u8 = 160;
+
+/// Smallest alpha of a texel that is drawn wherever it lies (not a fringe texel), and that may
+/// hide farther texels in hidden-texel removal.
+pub const FULL_ALPHA: u8 = 192;
 
 /// The fully transparent texel written by the stages that erase texels.
 pub const TRANSPARENT: [u8; 4] = [0, 0, 0, 0];

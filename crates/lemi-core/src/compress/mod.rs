@@ -25,6 +25,7 @@ pub mod ktx2_container;
 pub mod layer_image;
 pub mod macro_packing;
 pub mod micro_textures;
+pub mod outline_fringe;
 
 use rayon::prelude::*;
 
@@ -44,7 +45,7 @@ pub use hidden_texels::{
     TexelShift,
 };
 pub use ktx2_container::{read_ktx2, write_ktx2, Ktx2Error, Ktx2Texture, Supercompression};
-pub use layer_image::{LayerImage, OPAQUE_ALPHA, TRANSPARENT};
+pub use layer_image::{LayerImage, FRINGE_ALPHA, FULL_ALPHA, OPAQUE_ALPHA, TRANSPARENT};
 pub use macro_packing::{
     analyze_block_sharing, analyze_packing, pack_micro_textures, pack_rects, pack_stacked,
     stack_rects, BlockSharingStats, MacroPlacement, MacroTexture, Packing, PackingOptions,
@@ -54,6 +55,7 @@ pub use micro_textures::{
     analyze_micro_textures, extract_micro_textures, quad_corners, MicroTexture,
     MicroTextureOptions, MicroTextureStats, TexelRect,
 };
+pub use outline_fringe::{is_fringe_alpha, mark_outline_fringe};
 
 use crate::face::Face;
 

@@ -11,6 +11,10 @@
 // spans less than two pixels and FOOTPRINT is set, the colour is filtered instead (quad_color)
 // from bilinear fetches that never leave the quad's rectangle, while the alpha test still takes the
 // one texel under the pixel's centre: coverage stays exact.
+// Outline fringe (lemi_core::compress::outline_fringe): texels with alpha in
+// [globals.params.z, globals.params.y) fail the first test; fs_quad_fringe draws them in a pass of
+// their own, after everything else, only on pixels where something was drawn before (the depth
+// buffer as the earlier passes left it, copied to group 2: reverse-Z 0 where nothing was).
 // Group 1 holds the atlas page of macro-textures at bindings 3..=6 so that they never alias the
 // material bindings 0..=2 the shading module declares (unused here): the page as stored (3), a
 // bilinear sampler (4), the page decoded to linear light (5) and the page's parameters (6).
@@ -52,6 +56,7 @@ override FOOTPRINT: bool = true;
 @group(1) @binding(4) var macro_sampler: sampler;
 @group(1) @binding(5) var macro_linear: texture_2d<f32>;
 @group(1) @binding(6) var<uniform> page: PageParams;
+@group(2) @binding(0) var drawn_depth: texture_depth_2d;
 
 @vertex
 fn vs_quad(v: QuadIn) -> QuadOut {
@@ -164,4 +169,42 @@ fn fs_quad_opaque(in: QuadOut) -> QuadFragmentOut {
     let dx = dpdx(in.uv);
     let dy = dpdy(in.uv);
     return quad_output(quad_color(in, texel_at(in, in.uv), dx, dy), in);
+}
+
+// Whether the earlier passes drew pixel p; beyond the frame, where that is not known, true.
+fn drawn_at(p: vec2<i32>) -> bool {
+    let size = vec2<i32>(textureDimensions(drawn_depth));
+    if (any(p < vec2<i32>(0)) || any(p >= size)) {
+        return true;
+    }
+    return textureLoad(drawn_depth, p, 0) > 0.0;
+}
+
+// The outline fringe texels of a quad (alpha in [globals.params.z, globals.params.y)), each drawn
+// only where it can close a gap: over a pixel that already shows something (a farther surface,
+// beside an outline that parallax moved), or in a slit at most four pixels wide between pixels
+// that do (two outlines whose fringes face each other: the geometry's slit between them may be
+// narrower than a pixel, where the reference shows no background). Over open background it would
+// only fatten the silhouette.
+@fragment
+fn fs_quad_fringe(in: QuadOut) -> QuadFragmentOut {
+    let dx = dpdx(in.uv);
+    let dy = dpdy(in.uv);
+    let t = texel_at(in, in.uv);
+    if (t.a < globals.params.z || t.a >= globals.params.y) {
+        discard;
+    }
+    let p = vec2<i32>(in.clip.xy);
+    var show = textureLoad(drawn_depth, p, 0) > 0.0;
+    if (!show) {
+        let l = drawn_at(p + vec2<i32>(-1, 0)) || drawn_at(p + vec2<i32>(-2, 0));
+        let r = drawn_at(p + vec2<i32>(1, 0)) || drawn_at(p + vec2<i32>(2, 0));
+        let u = drawn_at(p + vec2<i32>(0, -1)) || drawn_at(p + vec2<i32>(0, -2));
+        let d = drawn_at(p + vec2<i32>(0, 1)) || drawn_at(p + vec2<i32>(0, 2));
+        show = (l && r) || (u && d);
+    }
+    if (!show) {
+        discard;
+    }
+    return quad_output(quad_color(in, t, dx, dy), in);
 }

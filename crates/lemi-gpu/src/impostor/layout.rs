@@ -24,6 +24,10 @@ pub const DEFAULT_PAGE_SIDE: u32 = 8192;
 /// alpha test, [`lemi_core::bundle::QUAD_ALPHA_CUTOFF`]).
 pub use lemi_core::bundle::QUAD_ALPHA_CUTOFF;
 
+/// Quad fragments whose macro-texel alpha is below this and not below [`QUAD_ALPHA_CUTOFF`] are
+/// outline fringe, drawn in a pass of their own ([`lemi_core::bundle::QUAD_FULL_ALPHA`]).
+pub use lemi_core::bundle::QUAD_FULL_ALPHA;
+
 /// One quad corner on the GPU (44 bytes): world position, macro-texture coordinates, the quad's
 /// rectangle in its macro-texture and where that macro-texture lies in its atlas page.
 #[repr(C)]
@@ -69,6 +73,9 @@ pub(super) struct QuadDraw {
     pub(super) first_index: u32,
     pub(super) index_count: u32,
     pub(super) opaque: bool,
+    /// Some quad of the draw has outline fringe texels (alpha in [`QUAD_ALPHA_CUTOFF`],
+    /// [`QUAD_FULL_ALPHA`]): the draw is made again in the fringe pass.
+    pub(super) fringe: bool,
 }
 
 /// The quads of a cell on the CPU: shared vertex/index arrays, the draw calls in draw order and
@@ -144,14 +151,14 @@ pub(super) fn quad_geometry(
             )));
         }
     }
-    let opaque: Vec<bool> = quads
+    let (opaque, fringe): (Vec<bool>, Vec<bool>) = quads
         .iter()
         .map(|q| {
             macros
                 .get(q.macro_index as usize)
-                .is_some_and(|m| rect_opaque(m, q.rect))
+                .map_or((false, false), |m| rect_kinds(m, q.rect))
         })
-        .collect();
+        .unzip();
     let sizes: Vec<(u32, u32)> = macros.iter().map(|m| (m.width, m.height)).collect();
     let atlas = atlas::pack(&sizes, max_side)?;
     let place = |q: &Quad| atlas.places.get(q.macro_index as usize).copied();
@@ -175,7 +182,9 @@ pub(super) fn quad_geometry(
     let band: Vec<u8> = (scales.iter())
         .map(|s| scale_band(s, reach, largest_texels))
         .collect();
-    let order = draw_order(quads, &opaque, &band, |q| place(q).map_or(0, |p| p.page));
+    let order = draw_order(quads, &opaque, &fringe, &band, |q| {
+        place(q).map_or(0, |p| p.page)
+    });
     let mut vertices = Vec::with_capacity(4 * quads.len());
     let mut indices = Vec::with_capacity(6 * quads.len());
     let mut draws: Vec<QuadDraw> = Vec::new();
@@ -191,7 +200,7 @@ pub(super) fn quad_geometry(
             continue; // checked above: every quad's macro-texture exists
         };
         let offset = [at.x, at.y];
-        let key = (q.face, opaque[k], at.page, band[k]);
+        let key = (q.face, opaque[k], fringe[k], at.page, band[k]);
         if run != Some(key) {
             run = Some(key);
             draws.push(QuadDraw {
@@ -199,6 +208,7 @@ pub(super) fn quad_geometry(
                 first_index: first,
                 index_count: 0,
                 opaque: opaque[k],
+                fringe: fringe[k],
             });
             bounds.push(Bounds {
                 texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
@@ -294,30 +304,39 @@ impl Bounds {
     }
 }
 
-/// The smallest macro-texel alpha (0..=255) the quad shader keeps: `a / 255 ≥ QUAD_ALPHA_CUTOFF`.
-fn min_kept_alpha() -> u8 {
+/// The smallest macro-texel alpha (0..=255) with `a / 255 ≥ cutoff`.
+fn min_alpha(cutoff: f32) -> u8 {
     (0..=255u8)
-        .find(|&a| a as f32 / 255.0 >= QUAD_ALPHA_CUTOFF)
+        .find(|&a| a as f32 / 255.0 >= cutoff)
         .unwrap_or(255)
 }
 
 /// Whether every texel of `rect` (`[x, y, w, h]`, inside `m`) passes the alpha test, so the quad
 /// can be drawn without it: the opaque pipeline then writes exactly what the alpha-tested one
 /// would (the fetch is clamped to the rectangle, so even the grown rim shows only these texels).
-fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
-    let keep = min_kept_alpha();
+/// And whether some texel of it is outline fringe (alpha in [`QUAD_ALPHA_CUTOFF`],
+/// [`QUAD_FULL_ALPHA`]), for the fringe pass. Returns `(opaque, fringe)`.
+fn rect_kinds(m: &MacroTexture, rect: [u32; 4]) -> (bool, bool) {
+    let (kept, full) = (min_alpha(QUAD_ALPHA_CUTOFF), min_alpha(QUAD_FULL_ALPHA));
     let [x, y, w, h] = rect.map(|v| v as usize);
     let stride = 4 * m.width as usize;
-    (y..y + h).all(|row| {
+    let (mut opaque, mut fringe) = (true, false);
+    for row in y..y + h {
         let start = row * stride + 4 * x;
-        m.rgba
-            .get(start..start + 4 * w)
-            .is_some_and(|px| px.chunks_exact(4).all(|t| t[3] >= keep))
-    })
+        let Some(px) = m.rgba.get(start..start + 4 * w) else {
+            return (false, false);
+        };
+        for t in px.chunks_exact(4) {
+            opaque &= t[3] >= full;
+            fringe |= (kept..full).contains(&t[3]);
+        }
+    }
+    (opaque, fringe)
 }
 
 /// The order quads are drawn in, as indices into `quads` (see the module docs): by face (so that
-/// a view culls the faces it does not see), the opaque quads before the alpha-tested ones, by
+/// a view culls the faces it does not see), the opaque quads before the alpha-tested ones (those
+/// with outline fringe texels after those without, so that the fringe pass draws runs), by
 /// atlas page (`page_of`), by texel scale band (`band`, [`scale_band`]), so that each (face, kind,
 /// page, band) run is one draw call; within a run the nearest layer first (a quad's `layer`
 /// counts far to near) so that depth rejection skips what nearer layers hide, then by
@@ -332,6 +351,7 @@ fn rect_opaque(m: &MacroTexture, rect: [u32; 4]) -> bool {
 fn draw_order(
     quads: &[Quad],
     opaque: &[bool],
+    fringe: &[bool],
     band: &[u8],
     page_of: impl Fn(&Quad) -> u32,
 ) -> Vec<usize> {
@@ -340,6 +360,7 @@ fn draw_order(
         (
             quads[k].face,
             !opaque[k],
+            fringe[k],
             page_of(&quads[k]),
             band[k],
             std::cmp::Reverse(quads[k].layer),
@@ -566,16 +587,18 @@ mod tests {
     fn quads_draw_by_face_and_kind_nearest_layer_first() {
         let mut m0 = opaque_macro(8, 8);
         set_alpha(&mut m0, 3, 3, 0);
-        set_alpha(&mut m0, 5, 0, 128); // 128/255 ≥ 0.5: kept
+        set_alpha(&mut m0, 5, 0, 128); // 128/255 ≥ 0.5 but < 0.75: outline fringe
         set_alpha(&mut m0, 6, 0, 127); // 127/255 < 0.5: discarded
-        assert_eq!(min_kept_alpha(), 128);
+        set_alpha(&mut m0, 0, 1, 192); // 192/255 ≥ 0.75: drawn everywhere
+        assert_eq!(min_alpha(QUAD_ALPHA_CUTOFF), 128);
+        assert_eq!(min_alpha(QUAD_FULL_ALPHA), 192);
         let macros = [m0, opaque_macro(4, 4)];
         let quads = [
-            quad(0, 1, [0, 0, 2, 2]), // opaque
+            quad(0, 1, [0, 0, 2, 2]), // alpha 255 and 192: opaque
             quad(1, 5, [0, 0, 4, 4]), // opaque
             quad(0, 3, [2, 2, 2, 2]), // holds (3, 3): alpha-tested
             quad(0, 1, [6, 0, 1, 1]), // alpha 127: alpha-tested
-            quad(0, 1, [4, 0, 2, 1]), // alpha 255 and 128: opaque
+            quad(0, 1, [4, 0, 2, 1]), // alpha 255 and 128: alpha-tested, with fringe
             quad(1, 1, [0, 0, 2, 2]), // opaque
         ];
         let QuadGeometry {
@@ -587,32 +610,41 @@ mod tests {
             opaque_quads,
         } = quad_geometry(&quads, &macros, 64, None).expect("valid quads");
         assert_eq!(bounds.len(), draws.len());
-        assert_eq!(opaque_quads, 4);
+        assert_eq!(opaque_quads, 3);
         assert_eq!(v.len(), 24);
         assert_eq!(i.len(), 36);
-        let d = |first_index, quads: u32, opaque| QuadDraw {
+        let d = |first_index, quads: u32, opaque, fringe| QuadDraw {
             page: 0,
             first_index,
             index_count: 6 * quads,
             opaque,
+            fringe,
         };
-        // one face: the opaque quads 1 (layer 5), 0, 4 (layer 1, macro 0) and 5 (layer 1, macro
-        // 1) in one draw, then the alpha-tested quads 2 (layer 3) and 3 (layer 1) in another
-        assert_eq!(draws, vec![d(0, 4, true), d(24, 2, false)]);
+        // one face: the opaque quads 1 (layer 5), 0 (layer 1, macro 0) and 5 (layer 1, macro 1)
+        // in one draw, then the alpha-tested quads 2 (layer 3) and 3 (layer 1) in another, then
+        // the one with fringe texels, 4
+        assert_eq!(
+            draws,
+            vec![
+                d(0, 3, true, false),
+                d(18, 2, false, false),
+                d(30, 1, false, true)
+            ]
+        );
         // both macro-textures side by side on one page
         assert_eq!(atlas.pages, vec![(16, 8)]);
         assert_eq!(v[0].offset, [8, 0]);
         assert_eq!(v[4].offset, [0, 0]);
-        assert_eq!(v[12].offset, [8, 0]);
-        // the layer-3 quad (fifth): rect [2, 2, 2, 2] of 8x8, texel coordinates, grown by
+        assert_eq!(v[8].offset, [8, 0]);
+        // the layer-3 quad (fourth): rect [2, 2, 2, 2] of 8x8, texel coordinates, grown by
         // QUAD_GROWTH_TEXELS on every side; the fetch is clamped to the rectangle
         let g = QUAD_GROWTH_TEXELS as f32;
-        assert_eq!(v[16].uv, [2.0 - g, 2.0 - g]);
-        assert_eq!(v[18].uv, [4.0 + g, 4.0 + g]);
-        assert_eq!(v[16].rect, [2.0, 2.0, 4.0, 4.0]);
+        assert_eq!(v[12].uv, [2.0 - g, 2.0 - g]);
+        assert_eq!(v[14].uv, [4.0 + g, 4.0 + g]);
+        assert_eq!(v[12].rect, [2.0, 2.0, 4.0, 4.0]);
         assert_eq!(v[4].rect, [0.0, 0.0, 2.0, 2.0]);
-        assert_eq!(v[8].rect, [4.0, 0.0, 6.0, 1.0]);
-        assert_eq!(v[20].rect, [6.0, 0.0, 7.0, 1.0]);
+        assert_eq!(v[20].rect, [4.0, 0.0, 6.0, 1.0]);
+        assert_eq!(v[16].rect, [6.0, 0.0, 7.0, 1.0]);
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
     }
 

@@ -9,7 +9,7 @@ use std::sync::Mutex;
 use lemi_core::camera::View;
 use lemi_core::enclosure::Window;
 
-use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF};
+use super::layout::{quad_vertex_layout, QUAD_ALPHA_CUTOFF, QUAD_FULL_ALPHA};
 use super::upload::{macro_format, macro_layout};
 use super::ImpostorCell;
 #[cfg(doc)]
@@ -97,12 +97,17 @@ pub struct ImpostorRenderer {
     /// although the filter is [`TexelFilter::Footprint`] (low 32 bits).
     last_draws: AtomicU64,
     texel_filter: TexelFilter,
+    /// Group 2 of the fringe pipelines: the depth buffer as the earlier passes left it.
+    drawn_depth_layout: wgpu::BindGroupLayout,
 }
 
-/// The two quad pipelines of one texel filter.
+/// The quad pipelines of one texel filter.
 struct QuadPipelines {
     alpha_tested: wgpu::RenderPipeline,
     opaque: wgpu::RenderPipeline,
+    /// The outline fringe texels of quads that have them (`fs_quad_fringe`), in a pass after all
+    /// others that samples the depth buffer those left.
+    fringe: wgpu::RenderPipeline,
 }
 
 impl ImpostorRenderer {
@@ -138,6 +143,29 @@ impl ImpostorRenderer {
                 bind_group_layouts: &[Some(gpu.globals_layout()), Some(&macro_layout)],
                 immediate_size: 0,
             });
+            let drawn_depth_layout =
+                device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("lemi impostor renderer: drawn depth"),
+                    entries: &[wgpu::BindGroupLayoutEntry {
+                        binding: 0,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Depth,
+                            view_dimension: wgpu::TextureViewDimension::D2,
+                            multisampled: false,
+                        },
+                        count: None,
+                    }],
+                });
+            let fringe_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("lemi impostor renderer: outline fringe"),
+                bind_group_layouts: &[
+                    Some(gpu.globals_layout()),
+                    Some(&macro_layout),
+                    Some(&drawn_depth_layout),
+                ],
+                immediate_size: 0,
+            });
             // The quads' colour target: the linear view where macro-textures are linear.
             let macro_format = macro_format(device);
             let quad_targets = |view_depth: bool| {
@@ -153,9 +181,10 @@ impl ImpostorRenderer {
             };
             let quad_pipeline_for =
                 |label: &str, entry_point: &str, footprint: bool, view_depth| {
+                    let fringe = entry_point == "fs_quad_fringe";
                     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                         label: Some(label),
-                        layout: Some(&quad_layout),
+                        layout: Some(if fringe { &fringe_layout } else { &quad_layout }),
                         vertex: wgpu::VertexState {
                             module: &quad_module,
                             entry_point: Some("vs_quad"),
@@ -192,6 +221,12 @@ impl ImpostorRenderer {
                         footprint,
                         view_depth,
                     ),
+                    fringe: quad_pipeline_for(
+                        "lemi impostor renderer: outline fringe",
+                        "fs_quad_fringe",
+                        footprint,
+                        view_depth,
+                    ),
                 })
             });
             let globals = device.create_buffer(&wgpu::BufferDescriptor {
@@ -221,6 +256,7 @@ impl ImpostorRenderer {
                 last_gpu: GpuTime::default(),
                 last_draws: AtomicU64::new(0),
                 texel_filter: TexelFilter::default(),
+                drawn_depth_layout,
             }
         })
     }
@@ -349,7 +385,9 @@ impl ImpostorRenderer {
             )));
         }
         let mut globals = ShadingGlobals::new(view, &options.lighting, options.alpha_cutoff)?;
-        globals.params[1] = QUAD_ALPHA_CUTOFF;
+        // the first alpha test keeps the fully opaque texels; the fringe pass those between
+        globals.params[1] = QUAD_FULL_ALPHA;
+        globals.params[2] = QUAD_ALPHA_CUTOFF;
         // impostor.wgsl: w says the quads draw into the linear view of the colour target (their
         // texels pass through as sRGB-encoded bytes), so a filtered colour, taken in linear light,
         // is encoded by the shader
@@ -459,10 +497,12 @@ impl ImpostorRenderer {
             // are linear, so a frame with both takes two passes (the second loads the first's
             // targets, depth included).
             let two_passes = linear && draw_near && !quads.is_empty();
+            // outline fringe texels: one more pass, after the depth buffer is copied
+            let fringe_pass = quads.iter().any(|(c, _)| c.draws.iter().any(|d| d.fringe));
             let mut pass = targets.begin_pass_part(
                 &mut encoder,
                 "lemi impostor pass",
-                if two_passes {
+                if two_passes || fringe_pass {
                     PassPart::First
                 } else {
                     PassPart::Whole
@@ -507,51 +547,86 @@ impl ImpostorRenderer {
                 pass = targets.begin_pass_part(
                     &mut encoder,
                     "lemi impostor quad pass",
-                    PassPart::Last,
+                    if fringe_pass {
+                        PassPart::Middle
+                    } else {
+                        PassPart::Last
+                    },
                     true,
                     true,
                     readback,
                 );
             }
-            scissor(&mut pass, window.as_ref());
-            let mut pipeline = None;
             let (mut quad_draws, mut nearest_draws) = (0u32, 0u32);
             // the frame's side of the texel scale bound, once for all draw calls
             let footprint = self.texel_filter == TexelFilter::Footprint;
             let seen = lemi_core::texel_scale::pixel_angle(view).map(|a| (view.eye(), a));
-            for (cell, (vertices, indices)) in &quads {
-                pass.set_bind_group(0, &self.globals_group, &[]);
-                pass.set_vertex_buffer(0, vertices.slice(..));
-                pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
-                let mut bound = None;
-                for (d, b) in cell.draws.iter().zip(&cell.bounds) {
-                    let Some(g) = cell.page_groups.get(d.page as usize) else {
-                        continue;
-                    };
-                    if b.outside(&view_proj) {
-                        continue;
+            // the quads' draw calls (`fringe`: only those with outline fringe texels, with the
+            // fringe pipeline), each culled by its box
+            let mut draw_quads = |pass: &mut wgpu::RenderPass<'_>, fringe: bool| {
+                scissor(pass, window.as_ref());
+                let mut pipeline = None;
+                for (cell, (vertices, indices)) in &quads {
+                    pass.set_bind_group(0, &self.globals_group, &[]);
+                    pass.set_vertex_buffer(0, vertices.slice(..));
+                    pass.set_index_buffer(indices.slice(..), wgpu::IndexFormat::Uint32);
+                    let mut bound = None;
+                    for (d, b) in cell.draws.iter().zip(&cell.bounds) {
+                        let Some(g) = cell.page_groups.get(d.page as usize) else {
+                            continue;
+                        };
+                        if (fringe && !d.fringe) || b.outside(&view_proj) {
+                            continue;
+                        }
+                        // the footprint filter only where some texel may span less than two
+                        // pixels: elsewhere it takes the centre texel, as the nearest pipeline
+                        // does
+                        let filter =
+                            footprint && !seen.is_some_and(|(e, a)| b.texels_magnified(e, a));
+                        nearest_draws += u32::from(footprint && !filter);
+                        if pipeline != Some((filter, d.opaque)) {
+                            let pipelines =
+                                &self.quad_pipelines[usize::from(readback)][usize::from(filter)];
+                            pass.set_pipeline(if fringe {
+                                &pipelines.fringe
+                            } else if d.opaque {
+                                &pipelines.opaque
+                            } else {
+                                &pipelines.alpha_tested
+                            });
+                            pipeline = Some((filter, d.opaque));
+                        }
+                        quad_draws += 1;
+                        if bound != Some(d.page) {
+                            pass.set_bind_group(1, g, &[]);
+                            bound = Some(d.page);
+                        }
+                        pass.draw_indexed(d.first_index..d.first_index + d.index_count, 0, 0..1);
                     }
-                    // the footprint filter only where some texel may span less than two
-                    // pixels: elsewhere it takes the centre texel, as the nearest pipeline does
-                    let filter = footprint && !seen.is_some_and(|(e, a)| b.texels_magnified(e, a));
-                    nearest_draws += u32::from(footprint && !filter);
-                    if pipeline != Some((filter, d.opaque)) {
-                        let pipelines =
-                            &self.quad_pipelines[usize::from(readback)][usize::from(filter)];
-                        pass.set_pipeline(if d.opaque {
-                            &pipelines.opaque
-                        } else {
-                            &pipelines.alpha_tested
-                        });
-                        pipeline = Some((filter, d.opaque));
-                    }
-                    quad_draws += 1;
-                    if bound != Some(d.page) {
-                        pass.set_bind_group(1, g, &[]);
-                        bound = Some(d.page);
-                    }
-                    pass.draw_indexed(d.first_index..d.first_index + d.index_count, 0, 0..1);
                 }
+            };
+            draw_quads(&mut pass, false);
+            if fringe_pass {
+                drop(pass);
+                targets.copy_depth(&mut encoder);
+                let drawn = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("lemi impostor drawn depth"),
+                    layout: &self.drawn_depth_layout,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(targets.depth_copy()),
+                    }],
+                });
+                pass = targets.begin_pass_part(
+                    &mut encoder,
+                    "lemi impostor outline fringe pass",
+                    PassPart::Last,
+                    linear,
+                    true,
+                    readback,
+                );
+                pass.set_bind_group(2, &drawn, &[]);
+                draw_quads(&mut pass, true);
             }
             drop(pass);
             self.last_draws.store(

@@ -16,7 +16,9 @@ use lemi_core::Scene;
 use wgpu::util::DeviceExt;
 
 use super::atlas::{Atlas, Place};
-use super::layout::{Bounds, ImpostorCellData, QuadDraw, QuadGeometry, QUAD_ALPHA_CUTOFF};
+use super::layout::{
+    Bounds, ImpostorCellData, QuadDraw, QuadGeometry, QUAD_ALPHA_CUTOFF, QUAD_FULL_ALPHA,
+};
 #[cfg(doc)]
 use super::ImpostorRenderer;
 use crate::scene::{GpuGeometry, GpuMaterials, GpuScene, UploadOptions};
@@ -83,13 +85,17 @@ fn transparent_black(format: wgpu::TextureFormat) -> bool {
     )
 }
 
-/// RGBA8 macro-texture texels as the quad shader expects them: alpha 0 or 255 on either side of
-/// [`QUAD_ALPHA_CUTOFF`] (what the alpha test decides does not change) and transparent texels
+/// RGBA8 macro-texture texels as the quad shader expects them: alpha 255 at or above
+/// [`QUAD_FULL_ALPHA`], [`lemi_core::compress::FRINGE_ALPHA`] for outline fringe texels between it
+/// and [`QUAD_ALPHA_CUTOFF`] (what the alpha tests decide does not change), and transparent texels
 /// black, so that filtering weighs opaque texels only ([`PageParams`]).
 fn premultiply(rgba: &mut [u8]) {
     for t in rgba.chunks_exact_mut(4) {
-        if f32::from(t[3]) / 255.0 >= QUAD_ALPHA_CUTOFF {
+        let a = f32::from(t[3]) / 255.0;
+        if a >= QUAD_FULL_ALPHA {
             t[3] = 255;
+        } else if a >= QUAD_ALPHA_CUTOFF {
+            t[3] = lemi_core::compress::FRINGE_ALPHA;
         } else {
             t.copy_from_slice(&[0; 4]);
         }
