@@ -73,8 +73,8 @@ pub(super) struct QuadDraw {
     pub(super) first_index: u32,
     pub(super) index_count: u32,
     pub(super) opaque: bool,
-    /// Some quad of the draw has outline fringe texels (alpha in [`QUAD_ALPHA_CUTOFF`],
-    /// [`QUAD_FULL_ALPHA`]): the draw is made again in the fringe pass.
+    /// The draw holds the pieces of quads around their outline fringe texels (alpha in
+    /// [`QUAD_ALPHA_CUTOFF`], [`QUAD_FULL_ALPHA`]), drawn in the fringe pass only.
     pub(super) fringe: bool,
 }
 
@@ -182,9 +182,7 @@ pub(super) fn quad_geometry(
     let band: Vec<u8> = (scales.iter())
         .map(|s| scale_band(s, reach, largest_texels))
         .collect();
-    let order = draw_order(quads, &opaque, &fringe, &band, |q| {
-        place(q).map_or(0, |p| p.page)
-    });
+    let order = draw_order(quads, &opaque, &band, |q| place(q).map_or(0, |p| p.page));
     let mut vertices = Vec::with_capacity(4 * quads.len());
     let mut indices = Vec::with_capacity(6 * quads.len());
     let mut draws: Vec<QuadDraw> = Vec::new();
@@ -200,7 +198,7 @@ pub(super) fn quad_geometry(
             continue; // checked above: every quad's macro-texture exists
         };
         let offset = [at.x, at.y];
-        let key = (q.face, opaque[k], fringe[k], at.page, band[k]);
+        let key = (q.face, opaque[k], at.page, band[k]);
         if run != Some(key) {
             run = Some(key);
             draws.push(QuadDraw {
@@ -208,7 +206,7 @@ pub(super) fn quad_geometry(
                 first_index: first,
                 index_count: 0,
                 opaque: opaque[k],
-                fringe: fringe[k],
+                fringe: false,
             });
             bounds.push(Bounds {
                 texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
@@ -238,6 +236,57 @@ pub(super) fn quad_geometry(
         indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         d.index_count += 6;
     }
+    // the outline fringe: per quad that has fringe texels, pieces of it around them only (runs
+    // of FRINGE_BLOCK² texel blocks), drawn in the fringe pass alone
+    let mut run = None;
+    for &k in order.iter().filter(|&&k| fringe[k]) {
+        let q = &quads[k];
+        let (Some(at), Some(m)) = (place(q), macros.get(q.macro_index as usize)) else {
+            continue;
+        };
+        let [x, y, rw, rh] = q.rect;
+        let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
+        let key = (q.face, at.page, band[k]);
+        if run != Some(key) {
+            run = Some(key);
+            draws.push(QuadDraw {
+                page: at.page,
+                first_index: indices.len() as u32,
+                index_count: 0,
+                opaque: false,
+                fringe: true,
+            });
+            bounds.push(Bounds {
+                texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
+                origin: seen_from.map_or(glam::DVec3::ZERO, |v| v.origin),
+                ..Bounds::EMPTY
+            });
+        } else if let (Some(b), Some(s)) = (bounds.last_mut(), scales[k]) {
+            if let Some(t) = &mut b.texel_scale {
+                t.add(s);
+            }
+        }
+        let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
+            continue;
+        };
+        if scales[k].is_none() {
+            b.texel_scale = None;
+        }
+        for piece in fringe_pieces(m, q.rect) {
+            let base = vertices.len() as u32;
+            for (position, uv) in piece_vertices(q, piece) {
+                b.add(glam::Vec3::from_array(position).as_dvec3());
+                vertices.push(QuadVertex {
+                    position,
+                    uv,
+                    rect,
+                    offset: [at.x, at.y],
+                });
+            }
+            indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
+            d.index_count += 6;
+        }
+    }
     Ok(QuadGeometry {
         vertices,
         indices,
@@ -245,6 +294,64 @@ pub(super) fn quad_geometry(
         atlas,
         bounds,
         opaque_quads: opaque.iter().filter(|&&o| o).count(),
+    })
+}
+
+/// Side in texels of the blocks the fringe pass draws around outline fringe texels.
+const FRINGE_BLOCK: u32 = 4;
+
+/// The pieces of `rect` (`[x, y, w, h]` in `m`) the fringe pass draws: every [`FRINGE_BLOCK`]²
+/// block (clipped to the rectangle) that holds an outline fringe texel, runs of them along a
+/// block row merged, as `[x0, y0, x1, y1]` in macro-texels.
+fn fringe_pieces(m: &MacroTexture, rect: [u32; 4]) -> Vec<[u32; 4]> {
+    let (kept, full) = (min_alpha(QUAD_ALPHA_CUTOFF), min_alpha(QUAD_FULL_ALPHA));
+    let [x, y, w, h] = rect;
+    let is_fringe = |tx: u32, ty: u32| {
+        let i = 4 * (ty as usize * m.width as usize + tx as usize) + 3;
+        m.rgba.get(i).is_some_and(|a| (kept..full).contains(a))
+    };
+    let mut pieces = Vec::new();
+    for y0 in (y..y + h).step_by(FRINGE_BLOCK as usize) {
+        let y1 = (y0 + FRINGE_BLOCK).min(y + h);
+        let mut open: Option<u32> = None;
+        for x0 in (x..x + w).step_by(FRINGE_BLOCK as usize) {
+            let x1 = (x0 + FRINGE_BLOCK).min(x + w);
+            let hit = (y0..y1).any(|ty| (x0..x1).any(|tx| is_fringe(tx, ty)));
+            match (hit, open) {
+                (true, None) => open = Some(x0),
+                (false, Some(start)) => {
+                    pieces.push([start, y0, x0, y1]);
+                    open = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(start) = open {
+            pieces.push([start, y0, x + w, y1]);
+        }
+    }
+    pieces
+}
+
+/// The drawn corners of the part `piece` (`[x0, y0, x1, y1]` in macro-texels, inside the quad's
+/// rectangle) of quad `q`, grown like the quad by [`QUAD_GROWTH_TEXELS`]: world positions from the
+/// quad's affine map of macro-texture coordinates (its corners and theirs, rotated or not), as
+/// [`Quad::drawn_vertices`] gives them for the whole rectangle.
+fn piece_vertices(q: &Quad, piece: [u32; 4]) -> [([f32; 3], [f32; 2]); 4] {
+    use glam::{DMat2, DVec2, DVec3};
+    let uv = q
+        .macro_texel_corners()
+        .map(|t| DVec2::new(t[0] as f64, t[1] as f64));
+    let p = q.corners.map(|c| DVec3::from_array(c.map(f64::from)));
+    // macro-texture coordinates → (a, b) along the quad's edges 0→1 and 0→3
+    let to_edges = DMat2::from_cols(uv[1] - uv[0], uv[3] - uv[0]).inverse();
+    let g = QUAD_GROWTH_TEXELS;
+    let [x0, y0, x1, y1] = piece.map(f64::from);
+    let corners = [(x0 - g, y0 - g), (x1 + g, y0 - g), (x1 + g, y1 + g), (x0 - g, y1 + g)];
+    corners.map(|(u, v)| {
+        let ab = to_edges * (DVec2::new(u, v) - uv[0]);
+        let pos = p[0] + (p[1] - p[0]) * ab.x + (p[3] - p[0]) * ab.y;
+        (pos.as_vec3().to_array(), [u as f32, v as f32])
     })
 }
 
@@ -335,8 +442,7 @@ fn rect_kinds(m: &MacroTexture, rect: [u32; 4]) -> (bool, bool) {
 }
 
 /// The order quads are drawn in, as indices into `quads` (see the module docs): by face (so that
-/// a view culls the faces it does not see), the opaque quads before the alpha-tested ones (those
-/// with outline fringe texels after those without, so that the fringe pass draws runs), by
+/// a view culls the faces it does not see), the opaque quads before the alpha-tested ones, by
 /// atlas page (`page_of`), by texel scale band (`band`, [`scale_band`]), so that each (face, kind,
 /// page, band) run is one draw call; within a run the nearest layer first (a quad's `layer`
 /// counts far to near) so that depth rejection skips what nearer layers hide, then by
@@ -351,7 +457,6 @@ fn rect_kinds(m: &MacroTexture, rect: [u32; 4]) -> (bool, bool) {
 fn draw_order(
     quads: &[Quad],
     opaque: &[bool],
-    fringe: &[bool],
     band: &[u8],
     page_of: impl Fn(&Quad) -> u32,
 ) -> Vec<usize> {
@@ -360,7 +465,6 @@ fn draw_order(
         (
             quads[k].face,
             !opaque[k],
-            fringe[k],
             page_of(&quads[k]),
             band[k],
             std::cmp::Reverse(quads[k].layer),
@@ -611,8 +715,8 @@ mod tests {
         } = quad_geometry(&quads, &macros, 64, None).expect("valid quads");
         assert_eq!(bounds.len(), draws.len());
         assert_eq!(opaque_quads, 3);
-        assert_eq!(v.len(), 24);
-        assert_eq!(i.len(), 36);
+        assert_eq!(v.len(), 28);
+        assert_eq!(i.len(), 42);
         let d = |first_index, quads: u32, opaque, fringe| QuadDraw {
             page: 0,
             first_index,
@@ -621,14 +725,15 @@ mod tests {
             fringe,
         };
         // one face: the opaque quads 1 (layer 5), 0 (layer 1, macro 0) and 5 (layer 1, macro 1)
-        // in one draw, then the alpha-tested quads 2 (layer 3) and 3 (layer 1) in another, then
-        // the one with fringe texels, 4
+        // in one draw, then the alpha-tested quads 2 (layer 3), 4 and 3 (layer 1) in another,
+        // then for the fringe pass the block of quad 4 around its fringe texel (all of it: a
+        // 2×1 rectangle is one block)
         assert_eq!(
             draws,
             vec![
                 d(0, 3, true, false),
-                d(18, 2, false, false),
-                d(30, 1, false, true)
+                d(18, 3, false, false),
+                d(36, 1, false, true)
             ]
         );
         // both macro-textures side by side on one page
@@ -645,6 +750,15 @@ mod tests {
         assert_eq!(v[4].rect, [0.0, 0.0, 2.0, 2.0]);
         assert_eq!(v[20].rect, [4.0, 0.0, 6.0, 1.0]);
         assert_eq!(v[16].rect, [6.0, 0.0, 7.0, 1.0]);
+        // the fringe piece of quad 4 is the whole quad as drawn: the same texel rectangle, the
+        // same grown texture coordinates, the same corners up to rounding
+        for c in 0..4 {
+            let (piece, whole) = (v[24 + c], v[20 + c]);
+            assert_eq!((piece.rect, piece.uv, piece.offset), (whole.rect, whole.uv, whole.offset));
+            for a in 0..3 {
+                assert!((piece.position[a] - whole.position[a]).abs() < 1e-5, "{piece:?}");
+            }
+        }
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
     }
 

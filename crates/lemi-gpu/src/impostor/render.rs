@@ -561,8 +561,8 @@ impl ImpostorRenderer {
             // the frame's side of the texel scale bound, once for all draw calls
             let footprint = self.texel_filter == TexelFilter::Footprint;
             let seen = lemi_core::texel_scale::pixel_angle(view).map(|a| (view.eye(), a));
-            // the quads' draw calls (`fringe`: only those with outline fringe texels, with the
-            // fringe pipeline), each culled by its box
+            // the quads' draw calls (`fringe`: the pieces of quads around their outline fringe
+            // texels instead, with the fringe pipeline), each culled by its box
             let mut draw_quads = |pass: &mut wgpu::RenderPass<'_>, fringe: bool| {
                 scissor(pass, window.as_ref());
                 let mut pipeline = None;
@@ -575,7 +575,7 @@ impl ImpostorRenderer {
                         let Some(g) = cell.page_groups.get(d.page as usize) else {
                             continue;
                         };
-                        if (fringe && !d.fringe) || b.outside(&view_proj) {
+                        if d.fringe != fringe || b.outside(&view_proj) {
                             continue;
                         }
                         // the footprint filter only where some texel may span less than two
