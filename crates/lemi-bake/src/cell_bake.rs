@@ -169,7 +169,7 @@ impl<'a> Baker<'a> {
             source,
         };
         let (mut record_s, mut clip_s) = (0.0, 0.0);
-        let mut opaque_recorded = 0;
+        let (mut opaque_recorded, mut outline_fringe) = (0, 0);
         let (compressed_faces, compress_s) = std::thread::scope(|scope| {
             // a rendezvous channel: the recorder waits until the compressor takes the face
             let (tx, rx) = std::sync::mpsc::sync_channel::<FaceLayers>(0);
@@ -205,6 +205,7 @@ impl<'a> Baker<'a> {
                     record_s += t.elapsed().as_secs_f64() - rec.clip_seconds;
                     clip_s += rec.clip_seconds;
                     opaque_recorded += rec.opaque_recorded;
+                    outline_fringe += rec.outline_fringe;
                     if tx.send(rec.layers).is_err() {
                         // the compressor stopped on an error: its result says which
                         break;
@@ -311,6 +312,7 @@ impl<'a> Baker<'a> {
             opaque_texels_recorded: opaque_recorded,
             opaque_texels_after_gap_fill: s.hidden.opaque_before,
             outline_copies: s.gap_fill.outline_copies,
+            outline_fringe,
             opaque_texels_after_hidden_removal: s.hidden.opaque_after,
             micro_textures: s.micro.micro_textures,
             micro_fill_ratio: s.micro.fill_ratio,

@@ -34,6 +34,8 @@ pub struct CellReport {
     pub opaque_texels_recorded: u64,
     /// Texels the outline copies added (`BakeParams::outline_copies`).
     pub outline_copies: u64,
+    /// Recorded texels marked as outline fringe (`BakeParams::outline_fringe`).
+    pub outline_fringe: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,
@@ -60,6 +62,7 @@ impl CellReport {
             submitted_triangles: s.submitted_triangles,
             opaque_texels_recorded: s.opaque_texels_recorded,
             outline_copies: s.outline_copies,
+            outline_fringe: s.outline_fringe,
             opaque_texels_after_hidden_removal: s.opaque_texels_after_hidden_removal,
             micro_textures: s.micro_textures,
             micro_fill_ratio: s.micro_fill_ratio,
@@ -118,6 +121,7 @@ fn add(total: &mut CellStats, s: &CellStats) {
     total.opaque_texels_recorded += s.opaque_texels_recorded;
     total.opaque_texels_after_gap_fill += s.opaque_texels_after_gap_fill;
     total.outline_copies += s.outline_copies;
+    total.outline_fringe += s.outline_fringe;
     total.opaque_texels_after_hidden_removal += s.opaque_texels_after_hidden_removal;
     total.micro_textures += s.micro_textures;
     total.macro_textures += s.macro_textures;

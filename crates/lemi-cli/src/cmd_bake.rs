@@ -615,6 +615,7 @@ pub fn run(args: Args) -> Result<()> {
             "micro_textures": total.micro_textures,
             "macro_textures": total.macro_textures,
             "outline_copies": total.outline_copies,
+            "outline_fringe": total.outline_fringe,
             "stage_seconds": total.seconds.iter().cloned().collect::<std::collections::BTreeMap<String, f64>>(),
             "warnings": warnings,
             "per_cell": per_cell,
@@ -665,6 +666,13 @@ pub fn run(args: Args) -> Result<()> {
             "copies     per cell: {:.0} outline texels copied into an adjacent layer ({:.1} % of the recorded texels)",
             total.outline_copies as f64 / n,
             100.0 * total.outline_copies as f64 / total.opaque_texels_recorded.max(1) as f64
+        );
+    }
+    if params.outline_fringe {
+        println!(
+            "fringe     per cell: {:.0} outline texels marked as fringe, drawn only over something ({:.1} % of the recorded texels)",
+            total.outline_fringe as f64 / n,
+            100.0 * total.outline_fringe as f64 / total.opaque_texels_recorded.max(1) as f64
         );
     }
     if !matches!(params.layering, Layering::Hlod { .. }) {

@@ -600,6 +600,18 @@ fn bake_rejects_absurd_flags_by_name() {
             vec!["--strategy", "equidistant", "--outline-copies"],
             "--outline-copies",
         ),
+        // BC1 (the default format) cannot hold the fringe's mark
+        (vec!["--outline-fringe"], "--outline-fringe"),
+        (
+            vec![
+                "--outline-fringe",
+                "--texture-format",
+                "bc7",
+                "--strategy",
+                "equidistant",
+            ],
+            "--outline-fringe",
+        ),
     ] {
         let mut args = base.to_vec();
         args.extend(extra);

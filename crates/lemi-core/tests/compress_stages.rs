@@ -5,7 +5,7 @@ use glam::DVec3;
 use lemi_core::compress::{
     analyze_micro_textures, copy_outlines, extract_micro_textures, fill_gaps, quad_corners,
     remove_hidden_texels, CompressError, GapSources, HiddenTexelOptions, LayerImage,
-    MicroTextureOptions, TexelRect, TRANSPARENT,
+    MicroTextureOptions, TexelRect, FRINGE_ALPHA, TRANSPARENT,
 };
 use lemi_core::Face;
 use proptest::prelude::*;
@@ -510,6 +510,16 @@ fn hidden_texels_next_to_a_hole_or_a_clip_border_texel_are_kept() {
     };
     let stats = remove_hidden_texels(&mut layers, &literal).unwrap();
     assert_eq!(stats.removed, 25);
+
+    // an outline fringe texel at (4,4) hides nothing (the runtime may leave it undrawn): its
+    // 3×3 neighbourhood behind stays, as behind a hole
+    let mut near = square(12, 1, 7, 'a');
+    let i = near.index(4, 4);
+    near.rgba[4 * i + 3] = FRINGE_ALPHA;
+    let mut layers = vec![near, full(12, 'b')];
+    let stats = remove_hidden_texels(&mut layers, &literal).unwrap();
+    assert_eq!(stats.removed, 16);
+    assert!(layers[1].is_opaque(layers[1].index(4, 4)));
 }
 
 #[test]

@@ -341,6 +341,10 @@ pub struct CellStats {
     /// `opaque_texels_after_gap_fill`, absent when none).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub outline_copies: u64,
+    /// Recorded texels marked as outline fringe ([`BakeParams::outline_fringe`]; counted in
+    /// `opaque_texels_recorded`, absent when none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub outline_fringe: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,

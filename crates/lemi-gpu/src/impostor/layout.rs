@@ -347,7 +347,12 @@ fn piece_vertices(q: &Quad, piece: [u32; 4]) -> [([f32; 3], [f32; 2]); 4] {
     let to_edges = DMat2::from_cols(uv[1] - uv[0], uv[3] - uv[0]).inverse();
     let g = QUAD_GROWTH_TEXELS;
     let [x0, y0, x1, y1] = piece.map(f64::from);
-    let corners = [(x0 - g, y0 - g), (x1 + g, y0 - g), (x1 + g, y1 + g), (x0 - g, y1 + g)];
+    let corners = [
+        (x0 - g, y0 - g),
+        (x1 + g, y0 - g),
+        (x1 + g, y1 + g),
+        (x0 - g, y1 + g),
+    ];
     corners.map(|(u, v)| {
         let ab = to_edges * (DVec2::new(u, v) - uv[0]);
         let pos = p[0] + (p[1] - p[0]) * ab.x + (p[3] - p[0]) * ab.y;
@@ -754,9 +759,15 @@ mod tests {
         // same grown texture coordinates, the same corners up to rounding
         for c in 0..4 {
             let (piece, whole) = (v[24 + c], v[20 + c]);
-            assert_eq!((piece.rect, piece.uv, piece.offset), (whole.rect, whole.uv, whole.offset));
+            assert_eq!(
+                (piece.rect, piece.uv, piece.offset),
+                (whole.rect, whole.uv, whole.offset)
+            );
             for a in 0..3 {
-                assert!((piece.position[a] - whole.position[a]).abs() < 1e-5, "{piece:?}");
+                assert!(
+                    (piece.position[a] - whole.position[a]).abs() < 1e-5,
+                    "{piece:?}"
+                );
             }
         }
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
