@@ -43,10 +43,11 @@ fn corner_views() -> EvalOptions {
     }
 }
 
-/// Bakes the cell of [`bake_and_eval`] into `dir`, with or without outline copies.
-fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64, outline_copies: bool) -> Bundle {
+/// The parameters of the cell of [`bake_and_eval`]: 256² layers, α = `alpha_scale` × the output
+/// view's edge pixel.
+fn cell_params(alpha_scale: f64) -> BakeParams {
     let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
-    let params = BakeParams {
+    BakeParams {
         cell_size: 10.0,
         cell_height: None,
         resolution: 256,
@@ -59,11 +60,31 @@ fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64, outline_copies: 
         micro_threshold: 0.6,
         layering: Default::default(),
         texture_format: Default::default(),
-        outline_copies,
+        outline_copies: false,
         outline_fringe: false,
+    }
+}
+
+/// The cell of [`bake_and_eval`]: the first of the city's avenue.
+fn cell_region() -> Aabb {
+    Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0))
+}
+
+/// Bakes the cell of [`bake_and_eval`] into `dir`, with or without outline copies.
+fn bake(gpu: &Gpu, scene: &Scene, dir: &Path, alpha_scale: f64, outline_copies: bool) -> Bundle {
+    let params = BakeParams {
+        outline_copies,
+        ..cell_params(alpha_scale)
     };
-    let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
-    bake_cells(gpu, scene, "builtin:city:30k:2", dir, params, region, None)
+    bake_cells(
+        gpu,
+        scene,
+        "builtin:city:30k:2",
+        dir,
+        params,
+        cell_region(),
+        None,
+    )
 }
 
 /// Bakes the cells of `region` (only cell `only` when given) of `scene` with `params` into
@@ -373,28 +394,15 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
     let Some(gpu) = gpu() else { return };
     let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
     let tmp = tempfile::tempdir().unwrap();
-    let alpha = alpha_from_output_view(FOV.to_radians(), W, PixelChoice::Edge).unwrap();
     let certify = |dir: &str, outline_fringe: bool| {
         let params = BakeParams {
-            cell_size: 10.0,
-            cell_height: None,
             resolution: 512,
-            target: LayerTarget::Layers(24),
-            faces: Face::HORIZONTAL.to_vec(),
-            alpha: 0.5 * alpha,
-            output_fov_deg: Some(FOV),
-            output_width: Some(W),
-            micro_grid: 8,
-            micro_threshold: 0.6,
-            layering: Default::default(),
-            texture_format: Default::default(),
-            outline_copies: false,
             outline_fringe,
+            ..cell_params(0.5)
         };
-        let region = Aabb::new(DVec3::new(15.0, 1.7, -5.0), DVec3::new(25.0, 1.7, 5.0));
         let source = "builtin:city:30k:2";
         let dir = tmp.path().join(dir);
-        let bundle = bake_cells(&gpu, &scene, source, &dir, params, region, None);
+        let bundle = bake_cells(&gpu, &scene, source, &dir, params, cell_region(), None);
         let cell = bundle.cell(bundle.manifest().cells[0].id).unwrap();
         let run = evaluate_bundle(&gpu, &bundle, &scene, &corner_views(), |_, _, _| {}).unwrap();
         (cell.header.stats.outline_fringe, run.result.summary)

@@ -648,24 +648,25 @@ fn overshoot_is_marked_where_no_triangle_covers_the_centre() {
         mark_overshoot: true,
         ..Default::default()
     };
+    let record = |face: Face, tris: &[ClipVertex], options: &RecordOptions| {
+        rec.record_with(
+            &mats,
+            DVec3::ZERO,
+            face,
+            tris,
+            &all_runs(tris),
+            0.1,
+            &lighting,
+            options,
+        )
+        .expect("record")
+    };
     let (mut inside, mut outside, mut unmarked) = (0, 0, 0);
     for n in 0..120u32 {
         let face = Face::ALL[(n % 6) as usize];
         let tri = random_triangle(&mut rng, face, res, n % 4);
-        let record = |options: &RecordOptions| {
-            rec.record_with(
-                &mats,
-                DVec3::ZERO,
-                face,
-                &tri,
-                &all_runs(&tri),
-                0.1,
-                &lighting,
-                options,
-            )
-            .expect("record")
-        };
-        let (plain, f) = (record(&RecordOptions::default()), record(&marked));
+        let plain = record(face, &tri, &RecordOptions::default());
+        let f = record(face, &tri, &marked);
         assert!(plain.overshoot.is_empty(), "not asked, not computed");
         assert_eq!(
             f.rgba, plain.rgba,
@@ -735,20 +736,8 @@ fn overshoot_is_marked_where_no_triangle_covers_the_centre() {
         cv(face.point(0.0, 0.9, 9.0), n),
     ];
     let both: Vec<ClipVertex> = near.iter().chain(&far).copied().collect();
-    let record = |options: &RecordOptions| {
-        rec.record_with(
-            &mats,
-            DVec3::ZERO,
-            face,
-            &both,
-            &all_runs(&both),
-            0.1,
-            &lighting,
-            options,
-        )
-        .expect("record")
-    };
-    let (plain, f) = (record(&RecordOptions::default()), record(&marked));
+    let plain = record(face, &both, &RecordOptions::default());
+    let f = record(face, &both, &marked);
     let (mut won, mut kept) = (0, 0);
     for k in 0..(res * res) as usize {
         let near_plain = plain.depth[k] < 7.0;

@@ -198,32 +198,23 @@ pub(super) fn quad_geometry(
             continue; // checked above: every quad's macro-texture exists
         };
         let offset = [at.x, at.y];
-        let key = (q.face, opaque[k], at.page, band[k]);
-        if run != Some(key) {
-            run = Some(key);
-            draws.push(QuadDraw {
-                page: at.page,
-                first_index: first,
-                index_count: 0,
-                opaque: opaque[k],
-                fringe: false,
-            });
-            bounds.push(Bounds {
-                texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
-                origin: seen_from.map_or(glam::DVec3::ZERO, |v| v.origin),
-                ..Bounds::EMPTY
-            });
-        } else if let (Some(b), Some(s)) = (bounds.last_mut(), scales[k]) {
-            if let Some(t) = &mut b.texel_scale {
-                t.add(s);
-            }
-        }
-        let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
-            continue;
+        let new = QuadDraw {
+            page: at.page,
+            first_index: first,
+            index_count: 0,
+            opaque: opaque[k],
+            fringe: false,
         };
-        if scales[k].is_none() {
-            b.texel_scale = None;
-        }
+        let key = (q.face, opaque[k], at.page, band[k]);
+        let (d, b) = draw_of(
+            &mut draws,
+            &mut bounds,
+            &mut run,
+            key,
+            new,
+            scales[k],
+            seen_from,
+        );
         for (position, uv) in q.drawn_vertices() {
             b.add(glam::Vec3::from_array(position).as_dvec3());
             vertices.push(QuadVertex {
@@ -246,32 +237,23 @@ pub(super) fn quad_geometry(
         };
         let [x, y, rw, rh] = q.rect;
         let rect = [x as f32, y as f32, (x + rw) as f32, (y + rh) as f32];
-        let key = (q.face, at.page, band[k]);
-        if run != Some(key) {
-            run = Some(key);
-            draws.push(QuadDraw {
-                page: at.page,
-                first_index: indices.len() as u32,
-                index_count: 0,
-                opaque: false,
-                fringe: true,
-            });
-            bounds.push(Bounds {
-                texel_scale: scales[k].map(|s| TexelScaleTable::new(reach, s)),
-                origin: seen_from.map_or(glam::DVec3::ZERO, |v| v.origin),
-                ..Bounds::EMPTY
-            });
-        } else if let (Some(b), Some(s)) = (bounds.last_mut(), scales[k]) {
-            if let Some(t) = &mut b.texel_scale {
-                t.add(s);
-            }
-        }
-        let (Some(d), Some(b)) = (draws.last_mut(), bounds.last_mut()) else {
-            continue;
+        let new = QuadDraw {
+            page: at.page,
+            first_index: indices.len() as u32,
+            index_count: 0,
+            opaque: false,
+            fringe: true,
         };
-        if scales[k].is_none() {
-            b.texel_scale = None;
-        }
+        let key = (q.face, at.page, band[k]);
+        let (d, b) = draw_of(
+            &mut draws,
+            &mut bounds,
+            &mut run,
+            key,
+            new,
+            scales[k],
+            seen_from,
+        );
         for piece in fringe_pieces(m, q.rect) {
             let base = vertices.len() as u32;
             for (position, uv) in piece_vertices(q, piece) {
@@ -295,6 +277,40 @@ pub(super) fn quad_geometry(
         bounds,
         opaque_quads: opaque.iter().filter(|&&o| o).count(),
     })
+}
+
+/// The draw call a quad of run `key` goes into, with its bounds: `new` (and new bounds) when the
+/// key differs from the last quad's (`run`), else the last one; the quad's texel scale bound
+/// (`scale`; `None`: unbounded) joins the draw call's.
+fn draw_of<'a, K: PartialEq>(
+    draws: &'a mut Vec<QuadDraw>,
+    bounds: &'a mut Vec<Bounds>,
+    run: &mut Option<K>,
+    key: K,
+    new: QuadDraw,
+    scale: Option<TexelScale>,
+    seen_from: Option<SeenFrom>,
+) -> (&'a mut QuadDraw, &'a mut Bounds) {
+    let reach = seen_from.map_or(0.0, |v| v.reach);
+    if run.as_ref() != Some(&key) || draws.is_empty() || bounds.len() != draws.len() {
+        *run = Some(key);
+        draws.push(new);
+        bounds.push(Bounds {
+            texel_scale: scale.map(|s| TexelScaleTable::new(reach, s)),
+            origin: seen_from.map_or(glam::DVec3::ZERO, |v| v.origin),
+            ..Bounds::EMPTY
+        });
+    } else if let (Some(b), Some(s)) = (bounds.last_mut(), scale) {
+        if let Some(t) = &mut b.texel_scale {
+            t.add(s);
+        }
+    }
+    let n = draws.len() - 1;
+    let b = &mut bounds[n];
+    if scale.is_none() {
+        b.texel_scale = None;
+    }
+    (&mut draws[n], b)
 }
 
 /// Side in texels of the blocks the fringe pass draws around outline fringe texels.
