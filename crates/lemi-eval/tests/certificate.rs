@@ -386,8 +386,8 @@ fn outline_copies_close_the_slivers_of_a_terrain_cell() {
 /// the output view's resolution (512² layers for the 256 px, 60° view, α half a pixel), with
 /// and without the fringe, certified from the centre and corners. The fringe takes away a third
 /// of the false coverage (the texel conservative recording grows every outline by, over the sky;
-/// measured 9,355 → 6,405 pixels: in views this small many sky gaps between outlines are
-/// narrower than the fringe pass's four pixels and stay closed) without a single crack pixel,
+/// measured 9,355 → 6,367 pixels: in views this small many sky gaps between outlines are
+/// one or two pixels wide, which the fringe pass closes) without a single crack pixel,
 /// and the silhouette distance does not grow.
 #[test]
 fn outline_fringe_puts_silhouettes_in_place_without_cracks() {

@@ -182,7 +182,7 @@ fn drawn_at(p: vec2<i32>) -> bool {
 
 // The outline fringe texels of a quad (alpha in [globals.params.z, globals.params.y)), each drawn
 // only where it can close a gap: over a pixel that already shows something (a farther surface,
-// beside an outline that parallax moved), or in a slit at most four pixels wide between pixels
+// beside an outline that parallax moved), or in a gap of one or two pixels between pixels
 // that do (two outlines whose fringes face each other: the geometry's slit between them may be
 // narrower than a pixel, where the reference shows no background). Over open background it would
 // only fatten the silhouette.
@@ -197,11 +197,14 @@ fn fs_quad_fringe(in: QuadOut) -> QuadFragmentOut {
     let p = vec2<i32>(in.clip.xy);
     var show = textureLoad(drawn_depth, p, 0) > 0.0;
     if (!show) {
-        let l = drawn_at(p + vec2<i32>(-1, 0)) || drawn_at(p + vec2<i32>(-2, 0));
-        let r = drawn_at(p + vec2<i32>(1, 0)) || drawn_at(p + vec2<i32>(2, 0));
-        let u = drawn_at(p + vec2<i32>(0, -1)) || drawn_at(p + vec2<i32>(0, -2));
-        let d = drawn_at(p + vec2<i32>(0, 1)) || drawn_at(p + vec2<i32>(0, 2));
-        show = (l && r) || (u && d);
+        // drawn pixels on both sides of a gap of at most two pixels, along the row or the column
+        let l1 = drawn_at(p + vec2<i32>(-1, 0));
+        let r1 = drawn_at(p + vec2<i32>(1, 0));
+        let u1 = drawn_at(p + vec2<i32>(0, -1));
+        let d1 = drawn_at(p + vec2<i32>(0, 1));
+        let row = (l1 && (r1 || drawn_at(p + vec2<i32>(2, 0)))) || (r1 && drawn_at(p + vec2<i32>(-2, 0)));
+        let column = (u1 && (d1 || drawn_at(p + vec2<i32>(0, 2)))) || (d1 && drawn_at(p + vec2<i32>(0, -2)));
+        show = row || column;
     }
     if (!show) {
         discard;
