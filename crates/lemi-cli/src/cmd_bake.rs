@@ -399,6 +399,17 @@ pub(crate) fn prepare(args: &Args) -> Result<Prepared> {
                      look blurrier than the geometry (the one-pixel guarantee assumes no magnification)",
                     args.resolution
                 ));
+                if args.outline_fringe {
+                    warnings.push(format!(
+                        "--outline-fringe: the runtime closes gaps of up to two pixels between \
+                         two outlines' fringes, made for fringe texels of at most a pixel; at \
+                         --resolution {} a texel spans up to {:.2} px of the output view, so \
+                         background may show between outlines (crack pixels); bake at \
+                         --resolution {min} or more",
+                        args.resolution,
+                        f64::from(min) / f64::from(args.resolution)
+                    ));
+                }
             }
         }
     }
