@@ -98,10 +98,10 @@ pub struct RecordOptions<'a> {
     pub side_plane: Option<f64>,
     /// Tell each covered texel whether its centre lies outside every triangle of the slab that
     /// covers it (a conservative overshoot, [`LayerFrame::overshoot`]), for the bake's outline
-    /// trimming (`lemi_core::compress::trim_outline_overshoot`). The shader lowers the alpha of
+    /// fringe (`lemi_core::compress::mark_outline_fringe`). The shader lowers the alpha of
     /// such a texel by a further ¼ and pushes its depth back so far that a triangle containing the
     /// centre wins the texel at any depth of the slab, so the winning colour and depth change
-    /// where an overshoot lay in front of a farther triangle: a recording that is trimmed and
+    /// where an overshoot lay in front of a farther triangle: a recording that marks a fringe and
     /// the depth recording of its certificate both mark. `false`: not asked.
     pub mark_overshoot: bool,
 }

@@ -11,7 +11,7 @@
 // Targets as in render.wgsl: 0 = Rgba8UnormSrgb colour, 1 = R32Uint bits of the f32 linear depth.
 // Alpha is 1, or ½ where the texel's point lies behind the side plane at depth globals.depth_axis.w
 // (the layer's plane, for the bake's outline copies; 0: no side plane). With globals.eye_lo.w = 1
-// (overshoot marked, for the bake's outline trimming) a texel whose centre lies outside its
+// (overshoot marked, for the bake's outline fringe) a texel whose centre lies outside its
 // triangle has alpha lowered by a further ¼, and its depth is pushed back far enough (×2^-10 in
 // reverse Z) that a triangle of the slab containing the centre wins the texel at any depth: a
 // texel then reads as overshoot only when no triangle of the slab covers its centre.
