@@ -40,7 +40,7 @@ use lemi_core::clip_border::is_clip_edge;
 use lemi_core::Face;
 use wgpu::util::DeviceExt;
 
-use crate::renderer::{COLOR_FORMAT, DEPTH_FORMAT, VIEW_DEPTH_FORMAT};
+use crate::renderer::DEPTH_FORMAT;
 use crate::shading::{Lighting, ShadingGlobals, SHADING_WGSL};
 use crate::targets::Targets;
 use crate::{Gpu, GpuError, GpuMaterials};
@@ -200,10 +200,12 @@ const REC_ATTRIBUTES: [wgpu::VertexAttribute; 12] = wgpu::vertex_attr_array![
 pub struct LayerRecorder {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    /// By material kind: untextured (0, the shader's `TEXTURED` constant off: the white texel's
-    /// sample taken as the constant 1, no fetch) and textured (1); the same texels for an
-    /// untextured material ([`crate::GpuMaterials::textured`]).
-    pipelines: [wgpu::RenderPipeline; 2],
+    /// By whether the view depth is written (0: a recording that reads back colour only, which
+    /// then neither clears nor stores the view-depth target) and by material kind: untextured
+    /// (0, the shader's `TEXTURED` constant off: the white texel's sample taken as the constant
+    /// 1, no fetch) and textured (1); the same texels for an untextured material
+    /// ([`crate::GpuMaterials::textured`]).
+    pipelines: [[wgpu::RenderPipeline; 2]; 2],
     globals: wgpu::Buffer,
     globals_group: wgpu::BindGroup,
     res: u32,
@@ -233,7 +235,7 @@ impl LayerRecorder {
                 bind_group_layouts: &[Some(gpu.globals_layout()), Some(gpu.material_layout())],
                 immediate_size: 0,
             });
-            let pipeline = |textured: bool| {
+            let pipeline = |textured: bool, view_depth: bool| {
                 device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                     label: Some("lemi layer recorder"),
                     layout: Some(&layout),
@@ -267,18 +269,7 @@ impl LayerRecorder {
                             constants: &crate::shading::material_constants(textured),
                             ..Default::default()
                         },
-                        targets: &[
-                            Some(wgpu::ColorTargetState {
-                                format: COLOR_FORMAT,
-                                blend: None,
-                                write_mask: wgpu::ColorWrites::ALL,
-                            }),
-                            Some(wgpu::ColorTargetState {
-                                format: VIEW_DEPTH_FORMAT,
-                                blend: None,
-                                write_mask: wgpu::ColorWrites::ALL,
-                            }),
-                        ],
+                        targets: &crate::renderer::frame_targets(view_depth),
                     }),
                     multiview_mask: None,
                     cache: None,
@@ -301,7 +292,10 @@ impl LayerRecorder {
             LayerRecorder {
                 device: gpu.device.clone(),
                 queue: gpu.queue.clone(),
-                pipelines: [pipeline(false), pipeline(true)],
+                pipelines: [
+                    [pipeline(false, false), pipeline(true, false)],
+                    [pipeline(false, true), pipeline(true, true)],
+                ],
                 globals,
                 globals_group,
                 res,
@@ -483,7 +477,14 @@ impl LayerRecorder {
                     label: Some("lemi record"),
                 });
             {
-                let mut pass = targets.begin_pass(&mut encoder, "lemi layer pass");
+                let mut pass = targets.begin_pass_part(
+                    &mut encoder,
+                    "lemi layer pass",
+                    crate::targets::PassPart::Whole,
+                    false,
+                    false,
+                    options.depth,
+                );
                 if let Some(buffer) = &buffer {
                     pass.set_bind_group(0, &self.globals_group, &[]);
                     pass.set_vertex_buffer(0, buffer.slice(..));
@@ -492,7 +493,10 @@ impl LayerRecorder {
                         if let Some(g) = materials.bind_group(r.material) {
                             let textured = materials.textured(r.material);
                             if pipeline != Some(textured) {
-                                pass.set_pipeline(&self.pipelines[usize::from(textured)]);
+                                pass.set_pipeline(
+                                    &self.pipelines[usize::from(options.depth)]
+                                        [usize::from(textured)],
+                                );
                                 pipeline = Some(textured);
                             }
                             pass.set_bind_group(1, g, &[]);

@@ -144,16 +144,8 @@ impl Targets {
         }
     }
 
-    /// A pass that clears colour and view depth to 0 and the depth buffer to 0 (reverse-Z far).
-    pub(crate) fn begin_pass<'e>(
-        &self,
-        encoder: &'e mut wgpu::CommandEncoder,
-        label: &str,
-    ) -> wgpu::RenderPass<'e> {
-        self.begin_pass_part(encoder, label, PassPart::Whole, false, false, true)
-    }
-
-    /// Like [`Targets::begin_pass`], with timestamps written at the beginning and the end of the
+    /// A pass that clears colour and view depth to 0 and the depth buffer to 0 (reverse-Z far),
+    /// with timestamps written at the beginning and the end of the
     /// pass when the device supports them; [`Targets::resolve_timer`] after the pass and
     /// [`Targets::read_frame`] (or [`Targets::read_timer`]) turn them into milliseconds. Without
     /// `view_depth` the pass has no view-depth target (pipelines of [`frame_targets`]`(false)`).
