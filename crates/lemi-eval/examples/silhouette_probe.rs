@@ -9,6 +9,11 @@
 //!
 //! Without `--eye`, the corners and the centre of the cell, each looking along every evaluated
 //! direction, and the five worst views by the 1× p99 are printed.
+//!
+//! `--jitter PX` measures what the silhouette distance gives for the geometry itself: instead of
+//! the `k×` frames, each view's reference is compared with the reference of the same eye turned
+//! by `PX` pixels right and `PX` up (every point of the image moved by about `PX` along both
+//! axes, no parallax), next to the impostor's numbers, and the maxima over all views are printed.
 
 use std::path::PathBuf;
 
@@ -33,6 +38,29 @@ struct Views {
 }
 
 impl Probe {
+    /// The reference from `eye`, turned from `dir` so that the image moves by about `px` pixels
+    /// along both axes (exactly at the image centre).
+    fn turned_reference(&self, eye: DVec3, dir: DVec3, px: f64) -> Result<Frame> {
+        let d = dir.normalize();
+        let up = if d.y.abs() > 0.9 { DVec3::Z } else { DVec3::Y };
+        let right = d.cross(up).normalize();
+        let up = right.cross(d);
+        // the tangent of the turn: px pixels of the image plane at distance 1
+        let t = px * 2.0 * (0.5 * self.fov_x.to_radians()).tan() / self.size.0 as f64;
+        let view = camera(
+            eye,
+            d + t * right + t * up,
+            self.fov_x,
+            self.size.0,
+            self.size.1,
+        )?
+        .view();
+        Ok(self
+            .r
+            .reference
+            .render(&self.r.full, &view, &RenderOptions::default())?)
+    }
+
     fn render(&self, eye: DVec3, dir: DVec3, k: u32) -> Result<Views> {
         let view = camera(eye, dir, self.fov_x, self.size.0 * k, self.size.1 * k)?.view();
         let options = RenderOptions::default();
@@ -86,6 +114,7 @@ fn main() -> Result<()> {
         );
     }
     let (mut eye, mut dir, mut k, mut out) = (None, None, 4u32, PathBuf::from("silhouette-probe"));
+    let mut jitter: Option<f64> = None;
     let mut i = 2;
     while i + 1 < args.len() {
         match args[i].as_str() {
@@ -93,6 +122,7 @@ fn main() -> Result<()> {
             "--dir" => dir = Some(vec3(&args[i + 1])?),
             "--k" => k = args[i + 1].parse().context("--k")?,
             "--out" => out = PathBuf::from(&args[i + 1]),
+            "--jitter" => jitter = Some(args[i + 1].parse().context("--jitter")?),
             f => bail!("unknown flag {f}"),
         }
         i += 2;
@@ -110,6 +140,9 @@ fn main() -> Result<()> {
     let views = common::views((eye, dir), &bundle, id, |l| {
         l == "centre" || l.starts_with("corner")
     })?;
+    if let Some(px) = jitter {
+        return jitter_table(&probe, &views, px, &out);
+    }
     let mut rows = Vec::new();
     for (label, e, d) in &views {
         let one = probe.render(*e, *d, 1)?;
@@ -133,6 +166,56 @@ fn main() -> Result<()> {
         coverage_png(v, &path)?;
         println!(
             "worst {n}: {label} (eye {e}, dir {d}) p99 {p99:.2} → {}",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// `--jitter`: per view, the silhouette numbers of the impostor and of the reference turned by
+/// `px` pixels, both against the reference; then their maxima and how many views exceed 2 px.
+fn jitter_table(
+    probe: &Probe,
+    views: &[(String, DVec3, DVec3)],
+    px: f64,
+    out: &std::path::Path,
+) -> Result<()> {
+    let mut worst: Option<(f32, String, Views)> = None;
+    let (mut imp_max, mut ref_max) = (0f32, 0f32);
+    let (mut imp_over, mut ref_over) = (0, 0);
+    let (mut imp_false, mut ref_false) = (0u64, 0u64);
+    for (label, e, d) in views {
+        let one = probe.render(*e, *d, 1)?;
+        let imp = summary(&one, 1)?;
+        let turned = Views {
+            reference: one.reference.clone(),
+            impostor: probe.turned_reference(*e, *d, px)?,
+        };
+        let geo = summary(&turned, 1)?;
+        println!(
+            "{label:32} impostor: p99 {:5.2} max {:6.2} false {:6} displ max {:5.2} | geometry turned {px} px: p99 {:5.2} max {:6.2} false {:6} displ max {:5.2}",
+            imp.0, imp.1, imp.3, imp.5, geo.0, geo.1, geo.3, geo.5
+        );
+        if worst.as_ref().is_none_or(|w| geo.1 > w.0) {
+            worst = Some((geo.1, format!("{label} (eye {e}, dir {d})"), turned));
+        }
+        imp_max = imp_max.max(imp.1);
+        ref_max = ref_max.max(geo.1);
+        imp_over += usize::from(imp.1 > 2.0);
+        ref_over += usize::from(geo.1 > 2.0);
+        imp_false += imp.3;
+        ref_false += geo.3;
+    }
+    println!(
+        "{} views: silhouette distance max {imp_max:.2} px (views above 2 px: {imp_over}, false coverage {imp_false} px) for the impostor, {ref_max:.2} px ({ref_over}, {ref_false} px) for the geometry turned by {px} px",
+        views.len()
+    );
+    if let Some((max, label, v)) = worst {
+        std::fs::create_dir_all(out)?;
+        let path = out.join("coverage-turned.png");
+        coverage_png(&v, &path)?;
+        println!(
+            "worst turned: {label}, max {max:.2} px → {}",
             path.display()
         );
     }
