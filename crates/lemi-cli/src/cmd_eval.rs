@@ -66,6 +66,13 @@ pub struct Args {
     /// pixels where the reference shows background.
     #[arg(long, value_name = "SHARE")]
     pub require_false_coverage: Option<f64>,
+    /// Also measure, per view, the silhouette distance of the geometry against itself seen
+    /// turned by this many pixels right and up (e.g. 0.1): the floor of the metric for any
+    /// renderer that moves points by that much, since features narrower than a pixel show at one
+    /// sampling of the pixel grid and not at another. Reported next to the impostor's maximum;
+    /// one more reference render per view.
+    #[arg(long, value_name = "PX")]
+    pub silhouette_floor: Option<f64>,
     /// Another bake of the same scene and cells (e.g. the PNG bake of a BC1 bundle): its frames
     /// of the same views are compared with this bundle's (FLIP, PSNR, pixels of changed
     /// coverage), the image cost of a texture format.
@@ -110,6 +117,11 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
     }
+    if let Some(x) = args.silhouette_floor {
+        if !(x.is_finite() && x > 0.0 && x <= 1.0) {
+            bail!("--silhouette-floor must be a fraction of a pixel in (0, 1] (got {x})");
+        }
+    }
     if let Some(f) = args.fov {
         if !(f.is_finite() && f > 0.0 && f < 180.0) {
             bail!("--fov must be in (0, 180) degrees (got {f})");
@@ -142,6 +154,7 @@ pub fn run(args: Args) -> Result<()> {
         seed: args.seed,
         size: args.size,
         fov_x_deg: args.fov,
+        silhouette_floor_px: args.silhouette_floor,
         ..Default::default()
     };
     let kind = crate::strategy::kind_for(&manifest, args.strategy.as_deref())?;
@@ -263,6 +276,16 @@ pub fn run(args: Args) -> Result<()> {
             s.false_coverage_pixels,
             100.0 * s.false_coverage
         );
+        if let (Some(px), Some(max), Some(above)) = (
+            args.silhouette_floor,
+            s.silhouette_floor_max_px,
+            s.views_above_silhouette_floor,
+        ) {
+            println!(
+                "floor      the geometry against itself turned by {px} px: silhouette max {max:.2} px; the impostor's maximum exceeds it in {above} of {} views",
+                s.views
+            );
+        }
         if let Some(t) = &run.textures {
             println!("textures   {}", t.describe());
         }

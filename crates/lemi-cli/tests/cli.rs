@@ -856,6 +856,12 @@ fn eval_certificate_gates_and_bad_input() {
         &lemi(&["eval", b, "--require-false-coverage", "2"]),
         "--require-false-coverage",
     );
+    for bad in ["0", "nan", "2"] {
+        assert_clean_error(
+            &lemi(&["eval", b, "--silhouette-floor", bad]),
+            "--silhouette-floor",
+        );
+    }
     assert_clean_error(&lemi(&["eval", b, "--size", "0x10"]), "0x10");
     assert_clean_error(&lemi(&["eval", b, "--fov", "200"]), "--fov");
     // a damaged cell file

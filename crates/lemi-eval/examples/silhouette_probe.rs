@@ -38,23 +38,11 @@ struct Views {
 }
 
 impl Probe {
-    /// The reference from `eye`, turned from `dir` so that the image moves by about `px` pixels
-    /// along both axes (exactly at the image centre).
+    /// The reference from `eye` looking along `dir`, turned by `px` pixels
+    /// ([`lemi_eval::turned_camera`]).
     fn turned_reference(&self, eye: DVec3, dir: DVec3, px: f64) -> Result<Frame> {
-        let d = dir.normalize();
-        let up = if d.y.abs() > 0.9 { DVec3::Z } else { DVec3::Y };
-        let right = d.cross(up).normalize();
-        let up = right.cross(d);
-        // the tangent of the turn: px pixels of the image plane at distance 1
-        let t = px * 2.0 * (0.5 * self.fov_x.to_radians()).tan() / self.size.0 as f64;
-        let view = camera(
-            eye,
-            d + t * right + t * up,
-            self.fov_x,
-            self.size.0,
-            self.size.1,
-        )?
-        .view();
+        let (w, h) = self.size;
+        let view = lemi_eval::turned_camera(eye, dir, self.fov_x, w, h, px)?.view();
         Ok(self
             .r
             .reference

@@ -78,6 +78,7 @@ impl ViewEval {
             silhouette: ErrorSummary::of(&self.silhouette.distances),
             displacement: ErrorSummary::of(&self.silhouette.displacement),
             false_coverage_pixels: self.silhouette.false_coverage,
+            silhouette_floor: None,
             pixels: self.flip.width as u64 * self.flip.height as u64,
         }
     }

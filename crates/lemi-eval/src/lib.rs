@@ -35,8 +35,9 @@ pub use report::{
     OutlineStats, ViewResult, WorstSet, WorstView, WORST_PER_BUNDLE, WORST_PER_CELL,
 };
 pub use run::{
-    camera, evaluate_bundle, evaluate_bundle_against, evaluate_with, output_view, AgainstResult,
-    CellRenderer, EvalOptions, EvalRun, RenderedView, TextureFootprint, ViewpointSet,
+    camera, evaluate_bundle, evaluate_bundle_against, evaluate_with, output_view, turned_camera,
+    AgainstResult, CellRenderer, EvalOptions, EvalRun, RenderedView, TextureFootprint,
+    ViewpointSet,
 };
 pub use stats::{Histogram, PixelErrorStats};
 pub use strategy_cells::{evaluate_strategy, StrategyCells};

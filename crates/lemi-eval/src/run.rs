@@ -52,6 +52,11 @@ pub struct EvalOptions {
     pub fov_x_deg: Option<f64>,
     /// Background colour of both renders.
     pub clear: [u8; 4],
+    /// Also measure each view's silhouette distance for the geometry against itself seen turned
+    /// by this many pixels right and up ([`turned_camera`]): the floor the metric has for any
+    /// renderer that moves points by that much (sub-pixel features that one sampling of the
+    /// pixel grid shows and another does not). One more reference render per view.
+    pub silhouette_floor_px: Option<f64>,
 }
 
 impl Default for EvalOptions {
@@ -64,6 +69,7 @@ impl Default for EvalOptions {
             size: None,
             fov_x_deg: None,
             clear: [150, 190, 235, 255],
+            silhouette_floor_px: None,
         }
     }
 }
@@ -296,6 +302,30 @@ pub fn guard_band_camera(
         band.width + 2 * band.px,
         band.height + 2 * band.px,
     )
+}
+
+/// The camera of [`camera`] turned so that the image moves by `px` pixels right and `px` up at
+/// its centre (elsewhere by that much within the turn's distortion, a few tens of percent at the
+/// edges of a 60° view), without moving the eye: the same scene sampled at another phase of the
+/// pixel grid.
+pub fn turned_camera(
+    eye: DVec3,
+    dir: DVec3,
+    fov_x: f64,
+    w: u32,
+    h: u32,
+    px: f64,
+) -> Result<Camera, EvalError> {
+    if !px.is_finite() || w == 0 {
+        return Err(err(format!("cannot turn a {w} px wide view by {px} px")));
+    }
+    let d = dir.normalize();
+    let up = if d.y.abs() > 0.9 { DVec3::Z } else { DVec3::Y };
+    let right = d.cross(up).normalize();
+    let up = right.cross(d);
+    // px pixels of the image plane at distance 1
+    let t = px * 2.0 * (0.5 * fov_x.to_radians()).tan() / f64::from(w);
+    camera(eye, d - t * right - t * up, fov_x, w, h)
 }
 
 /// What the evaluation asks of the images it judges: one view of one cell at a time.
@@ -735,11 +765,22 @@ fn evaluate_views(
                     let impostor = renderer.render(&wide, *eye)?.frame;
                     e.silhouette = silhouettes_within(&reference, &impostor, band)?;
                 }
+                let floor = match options.silhouette_floor_px {
+                    Some(px) => {
+                        let turned = turned_camera(*eye, *dir, fov_x, w, h, px)?.view();
+                        let turned = reference_renderer
+                            .render(&full, &turned, &render_options)
+                            .map_err(gpu_err("reference render"))?;
+                        Some(crate::image_metrics::silhouettes(&reference, &turned)?)
+                    }
+                    None => None,
+                };
                 stats.merge(&e.error);
                 outlines.silhouette.merge(&e.silhouette.distances);
                 outlines.displacement.merge(&e.silhouette.displacement);
                 let label = format!("{label}, looking {dname}");
-                let r = e.result(&id, &label, eye.to_array(), dir.to_array());
+                let mut r = e.result(&id, &label, eye.to_array(), dir.to_array());
+                r.silhouette_floor = floor.map(|f| crate::ErrorSummary::of(&f.distances));
                 worst.offer(&r, || WorstView {
                     label: format!("cell {id}, {label}"),
                     reference,
@@ -791,6 +832,43 @@ fn evaluate_views(
 mod tests {
     use super::*;
     use glam::DVec2;
+
+    /// A camera turned by `px` pixels moves the image centre's point by `px` right and `px` up,
+    /// and the points of a 60° view by that much within 40 % (a turn moves a point's pixel by
+    /// `1 + x²` times as much along its axis and `x·y` times across it, `x`, `y` its tangents).
+    #[test]
+    fn a_turned_camera_moves_the_image_by_its_pixels() {
+        let (eye, dir) = (DVec3::new(3.0, 1.7, -2.0), DVec3::new(0.6, -0.1, 0.8));
+        for (fov, w, h) in [(60.0, 1280, 720), (90.0, 64, 48)] {
+            let view = camera(eye, dir, fov, w, h).expect("camera").view();
+            for px in [0.1, 0.5, -0.25] {
+                let turned = turned_camera(eye, dir, fov, w, h, px)
+                    .expect("camera")
+                    .view();
+                let moved = |p: DVec3| {
+                    let (a, b) = (view.project(p)?, turned.project(p)?);
+                    Some(b.pixel - a.pixel)
+                };
+                let centre = moved(eye + 50.0 * dir.normalize()).expect("in view");
+                assert!(
+                    (centre - DVec2::new(px, -px)).abs().max_element() < 1e-2 * px.abs(),
+                    "{fov}° {w}x{h} by {px}: {centre:?}"
+                );
+                for k in 0..50 {
+                    let t = f64::from(k);
+                    let p = eye
+                        + 40.0 * dir
+                        + DVec3::new(13.0 * (0.7 * t).sin(), 9.0 * (1.3 * t).cos(), 5.0 * t.sin());
+                    let Some(d) = moved(p) else { continue };
+                    for c in [d.x, -d.y] {
+                        assert!(c / px >= 0.6 && c / px <= 1.4, "{d:?} for {px}");
+                    }
+                }
+            }
+        }
+        assert!(turned_camera(eye, dir, 60.0, 0, 10, 0.1).is_err());
+        assert!(turned_camera(eye, dir, 60.0, 10, 10, f64::NAN).is_err());
+    }
 
     /// The guard band's camera sees every point where the view's camera does, `px` pixels right
     /// and down (same focal length, same centre), including points beyond the view's edges.

@@ -395,6 +395,12 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
     let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let certify = |dir: &str, outline_fringe: bool| {
+        // with the fringe, also the floor of the silhouette metric: the geometry turned by half
+        // a pixel
+        let views = EvalOptions {
+            silhouette_floor_px: outline_fringe.then_some(0.5),
+            ..corner_views()
+        };
         let params = BakeParams {
             resolution: 512,
             outline_fringe,
@@ -404,7 +410,7 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
         let dir = tmp.path().join(dir);
         let bundle = bake_cells(&gpu, &scene, source, &dir, params, cell_region(), None);
         let cell = bundle.cell(bundle.manifest().cells[0].id).unwrap();
-        let run = evaluate_bundle(&gpu, &bundle, &scene, &corner_views(), |_, _, _| {}).unwrap();
+        let run = evaluate_bundle(&gpu, &bundle, &scene, &views, |_, _, _| {}).unwrap();
         (cell.header.stats.outline_fringe, run.result.summary)
     };
     let (none, plain) = certify("plain", false);
@@ -420,6 +426,19 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
         fringe.false_coverage_pixels,
         fringe.silhouette_pooled_p99_px,
     );
+    eprintln!(
+        "silhouette max {:.2} px; the geometry turned by 0.5 px: {:?} px, exceeded in {:?} of {} views",
+        fringe.silhouette_max_px,
+        fringe.silhouette_floor_max_px,
+        fringe.views_above_silhouette_floor,
+        fringe.views
+    );
+    assert_eq!(plain.silhouette_floor_max_px, None, "no floor unless asked");
+    let floor = fringe.silhouette_floor_max_px.expect("the floor asked for");
+    let above = fringe.views_above_silhouette_floor.expect("counted");
+    // a turn of half a pixel moves outlines across pixel centres: the floor is at least a pixel
+    assert!(floor >= 1.0, "{floor}");
+    assert!(above <= fringe.views);
     assert_eq!(none, 0, "no fringe unless asked");
     assert!(marked > 1000, "{marked} fringe texels");
     assert_eq!(fringe.crack_pixels, 0);

@@ -497,6 +497,7 @@ fn verdict_format() {
         displacement: ErrorSummary::default(),
         false_coverage_pixels: 0,
         pixels: 1,
+        silhouette_floor: None,
     };
     let b = BundleResult::new(vec![CellResult::new("c", vec![view], stats)]);
     assert_eq!(
@@ -720,6 +721,7 @@ fn pooled_outline_p99_is_over_all_silhouette_pixels_of_all_views() {
             displacement: ErrorSummary::of(&s),
             false_coverage_pixels: 0,
             pixels: 1,
+            silhouette_floor: None,
         };
         (view, s)
     };

@@ -92,6 +92,12 @@ pub struct ViewResult {
     /// nearest outline of the other frame.
     #[serde(default)]
     pub displacement: ErrorSummary,
+    /// The silhouette distances of the geometry against itself seen turned by a fraction of a
+    /// pixel ([`crate::EvalOptions::silhouette_floor_px`]): what the metric gives for a
+    /// renderer that moves every point by that much, the floor under the impostor's. `None`
+    /// where not asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub silhouette_floor: Option<ErrorSummary>,
     /// Pixels the impostor covers where the reference shows background.
     #[serde(default)]
     pub false_coverage_pixels: u64,
@@ -173,6 +179,14 @@ pub struct Aggregate {
     /// The p99 of the coverage displacement of all views pooled (px).
     #[serde(default, with = "f32_or_inf")]
     pub displacement_pooled_p99_px: f32,
+    /// The largest silhouette distance of the geometry against itself turned by a fraction of a
+    /// pixel in any view ([`ViewResult::silhouette_floor`]); `None` where not asked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub silhouette_floor_max_px: Option<f32>,
+    /// Views whose silhouette distance maximum exceeds that of the geometry turned by a fraction
+    /// of a pixel (of the views that measured it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub views_above_silhouette_floor: Option<u64>,
     /// Pixels the impostor covers where the reference shows background, over all views.
     #[serde(default)]
     pub false_coverage_pixels: u64,
@@ -213,6 +227,8 @@ impl Aggregate {
             displacement_pooled_p99_px: 0.0,
             false_coverage_pixels: 0,
             false_coverage: 0.0,
+            silhouette_floor_max_px: None,
+            views_above_silhouette_floor: None,
         };
         let (mut flip, mut coverage, mut mse, mut ssim) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
         let (mut outline_sum, mut outline_count, mut pixels) = (0.0f64, 0u64, 0.0f64);
@@ -225,6 +241,11 @@ impl Aggregate {
             a.displacement_max_px = a.displacement_max_px.max(v.displacement.max);
             a.displacement_p99_px = a.displacement_p99_px.max(v.displacement.p99);
             a.false_coverage_pixels += v.false_coverage_pixels;
+            if let Some(floor) = &v.silhouette_floor {
+                let m = a.silhouette_floor_max_px.get_or_insert(0.0);
+                *m = m.max(floor.max);
+                *a.views_above_silhouette_floor.get_or_insert(0) += u64::from(s.max > floor.max);
+            }
             pixels += v.pixels as f64;
             a.views += 1;
             a.crack_pixels += v.crack_pixels;
@@ -611,6 +632,7 @@ mod tests {
             displacement: ErrorSummary::default(),
             false_coverage_pixels: 0,
             pixels: 1,
+            silhouette_floor: None,
         }
     }
 
