@@ -40,7 +40,7 @@ fn aggregate_header() -> Markup {
         th { "views" } th { "max px" } th { "p99 px" } th { "mean px" } th { ">1 px %" }
         th { "crack px" } th { "views w/ cracks" } th { "mean FLIP" } th { "max FLIP" }
         th { "coverage" } th { "min cov." } th { "PSNR dB" } th { "SSIM" }
-        th { "silhouette max px" } th { "silhouette p99 px (all / worst view)" }
+        th { "silhouette max px (with --silhouette-floor: the geometry's own, turned)" } th { "silhouette p99 px (all / worst view)" }
         th { "displacement max px" } th { "displacement p99 px (all / worst view)" }
         th { "false cov. %" }
     }
@@ -61,7 +61,12 @@ fn aggregate_cells(a: &Aggregate) -> Markup {
         td { (fmt_num(a.min_coverage, 4)) }
         td { (fmt_num(a.psnr, 2)) }
         td { (fmt_num(a.ssim, 4)) }
-        td { (fmt_num(a.silhouette_max_px as f64, 2)) }
+        td {
+            (fmt_num(a.silhouette_max_px as f64, 2))
+            @if let Some(floor) = a.silhouette_floor_max_px {
+                " (the geometry's own: " (fmt_num(floor as f64, 2)) ")"
+            }
+        }
         td { (fmt_num(a.silhouette_pooled_p99_px as f64, 2)) " / " (fmt_num(a.silhouette_p99_px as f64, 2)) }
         td { (fmt_num(a.displacement_max_px as f64, 2)) }
         td { (fmt_num(a.displacement_pooled_p99_px as f64, 2)) " / " (fmt_num(a.displacement_p99_px as f64, 2)) }

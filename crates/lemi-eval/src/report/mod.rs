@@ -682,6 +682,38 @@ mod tests {
         assert_eq!(labels, ["v4", "v1"]);
     }
 
+    /// The floor's maximum is the largest of the views that measured it, and a view counts as
+    /// above it only when its own silhouette maximum is larger; without any, both stay `None`,
+    /// and the report's table shows the floor beside the maximum.
+    #[test]
+    fn the_silhouette_floor_aggregates_over_the_views_that_measured_it() {
+        let with = |own: f32, floor: Option<f32>| {
+            let mut v = view("c", "v", 0, 0.1, 0.0);
+            v.silhouette.max = own;
+            v.silhouette_floor = floor.map(|max| ErrorSummary {
+                max,
+                ..Default::default()
+            });
+            v
+        };
+        let views = [
+            with(3.0, Some(1.4)),
+            with(2.0, Some(40.0)),
+            with(5.0, None),
+            with(1.0, Some(1.0)),
+        ];
+        let a = Aggregate::of(&views, &PixelErrorStats::new());
+        assert_eq!(a.silhouette_floor_max_px, Some(40.0));
+        assert_eq!(a.views_above_silhouette_floor, Some(1));
+        assert_eq!(a.silhouette_max_px, 5.0);
+        let none = Aggregate::of(&views[2..3], &PixelErrorStats::new());
+        assert_eq!(none.silhouette_floor_max_px, None);
+        assert_eq!(none.views_above_silhouette_floor, None);
+        let cell = CellResult::new("c", views.to_vec(), PixelErrorStats::new());
+        let page = html::index_html(&BundleResult::new(vec![cell]), &[]).expect("html");
+        assert!(page.contains("5.00 (the geometry's own: 40.00)"), "{page}");
+    }
+
     #[test]
     fn aggregate_pools_psnr_by_mse() {
         let mut a = view("c", "a", 0, 0.1, 0.0);
