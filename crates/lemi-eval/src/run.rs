@@ -267,12 +267,7 @@ pub fn camera(eye: DVec3, dir: DVec3, fov_x: f64, w: u32, h: u32) -> Result<Came
         * ((0.5 * fov_x.to_radians()).tan() * h as f64 / w as f64)
             .atan()
             .to_degrees();
-    let up = if dir.normalize().y.abs() > 0.9 {
-        DVec3::Z
-    } else {
-        DVec3::Y
-    };
-    Camera::new(eye, dir, up, fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
+    Camera::new(eye, dir, world_up(dir), fov_y, w, h).map_err(|e| err(format!("camera: {e}")))
 }
 
 /// The guard band of a view whose outline distances reach the image's edge
@@ -304,6 +299,15 @@ pub fn guard_band_camera(
     )
 }
 
+/// The up vector [`camera`] builds its frame with: +Y, or +Z for a direction near the vertical.
+fn world_up(dir: DVec3) -> DVec3 {
+    if dir.normalize().y.abs() > 0.9 {
+        DVec3::Z
+    } else {
+        DVec3::Y
+    }
+}
+
 /// The camera of [`camera`] turned so that the image moves by `px` pixels right and `px` up at
 /// its centre (elsewhere by that much within the turn's distortion, a few tens of percent at the
 /// edges of a 60° view), without moving the eye: the same scene sampled at another phase of the
@@ -320,8 +324,7 @@ pub fn turned_camera(
         return Err(err(format!("cannot turn a {w} px wide view by {px} px")));
     }
     let d = dir.normalize();
-    let up = if d.y.abs() > 0.9 { DVec3::Z } else { DVec3::Y };
-    let right = d.cross(up).normalize();
+    let right = d.cross(world_up(d)).normalize();
     let up = right.cross(d);
     // px pixels of the image plane at distance 1
     let t = px * 2.0 * (0.5 * fov_x.to_radians()).tan() / f64::from(w);
