@@ -277,9 +277,12 @@ impl<'a> Baker<'a> {
             .micro_textures
             .iter()
             .zip(&compressed.placements)
-            .map(|(m, p)| {
+            .enumerate()
+            .map(|(i, (m, p))| {
                 let (fw, fh) = p.footprint(m.rect.width(), m.rect.height());
                 Quad {
+                    // the fringe micro-textures come last
+                    fringe: i + compressed.fringe_micro_textures >= compressed.micro_textures.len(),
                     face: m.face,
                     layer: m.layer as u16,
                     texels: [m.rect.x0, m.rect.y0, m.rect.x1, m.rect.y1].map(|v| v as u16),
@@ -334,6 +337,7 @@ impl<'a> Baker<'a> {
         let layers = layer_infos(plan);
         Ok(CellFile {
             header: CellHeader {
+                fringe_quads: compressed.fringe_micro_textures as u64,
                 cell: *cell,
                 params_hash: params.hash(),
                 scene_fingerprint: String::new(),
@@ -391,6 +395,7 @@ impl<'a> Baker<'a> {
         };
         Ok(CellFile {
             header: CellHeader {
+                fringe_quads: 0,
                 cell: *cell,
                 params_hash: params.hash(),
                 scene_fingerprint: String::new(),
@@ -436,6 +441,8 @@ pub fn compress_options(params: &BakeParams, cell: &ViewCell) -> CompressOptions
         },
         gap_fill: Recording::of(params.layering).gap_fill,
         outline_copies: params.outline_copies && Recording::of(params.layering).crack_free,
+        // a format without the fringe's alpha level keeps it as quads of its own
+        fringe_quads: params.outline_fringe && !params.texture_format.keeps_fringe(),
         micro: MicroTextureOptions {
             cell_size: params.micro_grid,
             threshold: params.micro_threshold,

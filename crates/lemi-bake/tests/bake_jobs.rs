@@ -335,6 +335,7 @@ fn assert_same_cell_files(reference: &Path, other: &Path, ids: &[String], what: 
 fn synthetic_cell(cell: &ViewCell, tag: u32) -> CellFile {
     CellFile {
         header: CellHeader {
+            fringe_quads: 0,
             cell: *cell,
             params_hash: String::new(),
             scene_fingerprint: String::new(),

@@ -649,6 +649,7 @@ fn bake_copy_stages(
         .map(|(m, p)| {
             let (fw, fh) = p.footprint(m.rect.width(), m.rect.height());
             Quad {
+                fringe: false,
                 face: m.face,
                 layer: m.layer as u16,
                 texels: [m.rect.x0, m.rect.y0, m.rect.x1, m.rect.y1].map(|v| v as u16),

@@ -119,8 +119,9 @@ pub struct Args {
     /// Mark the texel that conservative recording grows an outline by as fringe, which the
     /// runtime draws only where something lies behind it (docs/COMPRESSION.md, "Outline
     /// fringe"): silhouettes against the sky land where the geometry's do instead of up to a
-    /// texel outside, while strips over farther surfaces stay closed. Needs --texture-format bc7,
-    /// uastc or png (BC1's one-bit alpha cannot hold the mark); not with --strategy equidistant.
+    /// texel outside, while strips over farther surfaces stay closed. BC7, UASTC and PNG mark the
+    /// fringe texels by their alpha; BC1 and ETC1S, whose alpha has one bit, keep them in quads
+    /// of their own ("fringe quads"). Not with --strategy equidistant.
     #[arg(long)]
     pub outline_fringe: bool,
     /// Micro-texture grid cell in texels (GI 2002 sec. 5.3).

@@ -13,6 +13,7 @@ use lemi_core::bundle::{BakeParams, Bundle, LayerTarget, SceneRef};
 use lemi_core::camera::View;
 use lemi_core::cell::CellGrid;
 use lemi_core::cell::ViewCell;
+use lemi_core::compress::TextureFormat;
 use lemi_core::placement::{alpha_from_output_view, PixelChoice};
 use lemi_core::{Aabb, Face, Scene};
 use lemi_eval::{
@@ -388,13 +389,16 @@ fn outline_copies_close_the_slivers_of_a_terrain_cell() {
 /// of the false coverage (the texel conservative recording grows every outline by, over the sky;
 /// measured 9,355 → 6,367 pixels: in views this small many sky gaps between outlines are
 /// one or two pixels wide, which the fringe pass closes) without a single crack pixel,
-/// and the silhouette distance does not grow.
+/// and the silhouette distance does not grow. BC1, whose one-bit alpha cannot mark fringe
+/// texels, keeps them as fringe quads and gives the same coverage within a few pixels (BC1's
+/// punch-through alpha keeps coverage exact; the fringe quads' grown rims repeat their own edge
+/// texels where the pieces of the alpha-marked fringe show their neighbours').
 #[test]
 fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
     let Some(gpu) = gpu() else { return };
     let scene = lemi_scene::builtin::build("city:30k:2").unwrap();
     let tmp = tempfile::tempdir().unwrap();
-    let certify = |dir: &str, outline_fringe: bool| {
+    let certify = |dir: &str, outline_fringe: bool, texture_format: TextureFormat| {
         // with the fringe, also the floor of the silhouette metric: the geometry turned by half
         // a pixel
         let views = EvalOptions {
@@ -404,6 +408,7 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
         let params = BakeParams {
             resolution: 512,
             outline_fringe,
+            texture_format,
             ..cell_params(0.5)
         };
         let source = "builtin:city:30k:2";
@@ -411,10 +416,35 @@ fn outline_fringe_puts_silhouettes_in_place_without_cracks() {
         let bundle = bake_cells(&gpu, &scene, source, &dir, params, cell_region(), None);
         let cell = bundle.cell(bundle.manifest().cells[0].id).unwrap();
         let run = evaluate_bundle(&gpu, &bundle, &scene, &views, |_, _, _| {}).unwrap();
-        (cell.header.stats.outline_fringe, run.result.summary)
+        let fringe_quads = cell.header.quads.iter().filter(|q| q.fringe).count() as u64;
+        assert_eq!(fringe_quads, cell.header.fringe_quads);
+        (
+            cell.header.stats.outline_fringe,
+            fringe_quads,
+            run.result.summary,
+        )
     };
-    let (none, plain) = certify("plain", false);
-    let (marked, fringe) = certify("fringe", true);
+    let (none, _, plain) = certify("plain", false, TextureFormat::Png);
+    let (marked, png_quads, fringe) = certify("fringe", true, TextureFormat::Png);
+    let (bc1_marked, bc1_quads, bc1) = certify("fringe-bc1", true, TextureFormat::Bc1);
+    eprintln!(
+        "BC1 with {bc1_marked} fringe texels in {bc1_quads} fringe quads: {} crack pixels, false \
+         coverage {} px, silhouette p99 {:.2} px, max error {:.2} px",
+        bc1.crack_pixels, bc1.false_coverage_pixels, bc1.silhouette_pooled_p99_px, bc1.max_error_px
+    );
+    assert_eq!(png_quads, 0, "PNG marks the fringe by its alpha");
+    assert_eq!(bc1_marked, marked, "the same recording");
+    assert!(bc1_quads > 100, "{bc1_quads} fringe quads");
+    assert_eq!(bc1.crack_pixels, 0);
+    let tolerance = 0.02 * fringe.false_coverage_pixels as f64 + 20.0;
+    assert!(
+        (bc1.false_coverage_pixels as f64 - fringe.false_coverage_pixels as f64).abs() <= tolerance,
+        "BC1 {} against PNG {} false-coverage pixels",
+        bc1.false_coverage_pixels,
+        fringe.false_coverage_pixels
+    );
+    assert!(bc1.silhouette_pooled_p99_px <= fringe.silhouette_pooled_p99_px + 1e-6);
+    assert!(bc1.max_error_px <= 0.5 + 1e-3, "{}", bc1.max_error_px);
     eprintln!(
         "512² for 256 px: without the fringe {} crack pixels, false coverage {} px, silhouette \
          p99 {:.2} px; with {marked} fringe texels: {} crack pixels, false coverage {} px, \

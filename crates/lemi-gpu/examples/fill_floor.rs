@@ -105,6 +105,7 @@ fn main() -> Result<(), Error> {
                     [(u * s) as f32, (v * s) as f32, -z as f32]
                 };
                 quads.push(Quad {
+                    fringe: false,
                     face: Face::NegZ,
                     layer: 0,
                     texels: [x0 as u16, y0 as u16, (x0 + step) as u16, (y0 + step) as u16],

@@ -37,6 +37,7 @@ fn quad(
 ) -> Quad {
     let p = |x: f32, y: f32| [x + offset[0], y + offset[1], z + offset[2]];
     Quad {
+        fringe: false,
         face: Face::NegZ,
         layer,
         texels: [0, 0, rect[2] as u16, rect[3] as u16],

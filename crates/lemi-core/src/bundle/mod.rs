@@ -260,6 +260,10 @@ pub struct Quad {
     pub rect: [u32; 4],
     /// Stored rotated by 90° (GI 2002 sec. 5.4: tall micro-textures are turned to lie flat).
     pub rotated: bool,
+    /// A fringe quad ([`CellHeader::fringe_quads`]): its texels are outline fringe, drawn only
+    /// where something lies behind them. Not stored per quad: the fringe quads are the last
+    /// `fringe_quads` of the cell.
+    pub fringe: bool,
 }
 
 impl Quad {
@@ -422,6 +426,13 @@ pub struct CellHeader {
     /// quad's place in the macro-textures from them and the quads' sizes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub packing: Option<PackingOptions>,
+    /// How many quads at the end of [`CellHeader::quads`] are *fringe quads*: the outline fringe
+    /// of a texture format without its alpha level (`BakeParams::outline_fringe` with BC1 or
+    /// ETC1S, [`crate::compress::split_outline_fringe`]), drawn only where something lies behind
+    /// them. Absent (0) in the file otherwise; a reader that ignores it draws them as ordinary
+    /// quads, as the glTF export does.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub fringe_quads: u64,
 }
 
 impl CellHeader {
@@ -827,6 +838,17 @@ pub struct CellFile {
 
 impl CellFile {
     pub fn encode(&self) -> Result<Vec<u8>, ContainerError> {
+        let quads = &self.header.quads;
+        let fringe = quads.iter().filter(|q| q.fringe).count();
+        if fringe as u64 != self.header.fringe_quads
+            || quads[quads.len() - fringe..].iter().any(|q| !q.fringe)
+        {
+            return Err(ContainerError::Header(format!(
+                "the header says {} fringe quads, the quads hold {fringe}, and they must be the \
+                 last ones",
+                self.header.fringe_quads
+            )));
+        }
         if self.header.object.is_some() {
             return self.encode_v5(OBJECT_BUNDLE_VERSION);
         }
@@ -1038,6 +1060,17 @@ impl CellFile {
                 header.macros.len(),
                 macro_blobs.len()
             )));
+        }
+        if header.fringe_quads as usize > header.quads.len() {
+            return Err(ContainerError::Header(format!(
+                "{} fringe quads in a cell of {} quads",
+                header.fringe_quads,
+                header.quads.len()
+            )));
+        }
+        let first_fringe = header.quads.len() - header.fringe_quads as usize;
+        for q in &mut header.quads[first_fringe..] {
+            q.fringe = true;
         }
         for (i, q) in header.quads.iter().enumerate() {
             let fits = header.macros.get(q.macro_index as usize).is_some_and(|m| {
@@ -1653,6 +1686,7 @@ fn decode_quad_records(raw: &[u8], header: &CellHeader) -> Result<Vec<Quad>, Con
             let (w, h) = (x1 - x0, y1 - y0);
             let (fw, fh) = if rotated { (h, w) } else { (w, h) };
             Ok(Quad {
+                fringe: false,
                 face,
                 layer,
                 texels,
@@ -1777,6 +1811,7 @@ mod tests {
     pub(crate) fn sample_cell() -> CellFile {
         CellFile {
             header: CellHeader {
+                fringe_quads: 0,
                 cell: ViewCell {
                     index: IVec3::new(1, 0, 2),
                     center: DVec3::new(15.0, 1.7, 25.0),
@@ -1793,6 +1828,7 @@ mod tests {
                     far_border: f64::MAX,
                 }]],
                 quads: vec![Quad {
+                    fringe: false,
                     face: Face::PosX,
                     layer: 0,
                     texels: [8, 16, 16, 24],
@@ -1847,6 +1883,71 @@ mod tests {
         let n = bad.len();
         bad[n / 3] ^= 1;
         assert!(CellFile::decode(&bad).is_err());
+    }
+
+    /// The fringe quads are the last `fringe_quads` of the cell: the header's count sets their
+    /// flags on reading, the writer refuses a count that disagrees with the flags or flags that
+    /// are not the last quads, and the reader a count above the quads'.
+    #[test]
+    fn fringe_quads_are_the_last_ones_and_round_trip() {
+        let mut c = sample_cell();
+        let mut fringe = c.header.quads[0];
+        fringe.fringe = true;
+        fringe.rect = [8, 0, 8, 8];
+        c.header.quads.push(fringe);
+        c.header.fringe_quads = 1;
+        let bytes = c.encode().expect("encodes");
+        let back = CellFile::decode(&bytes).expect("decodes");
+        assert_eq!(back, c);
+        assert_eq!(
+            back.header
+                .quads
+                .iter()
+                .map(|q| q.fringe)
+                .collect::<Vec<_>>(),
+            [false, true]
+        );
+        // a cell without fringe quads does not mention them (bundles from before are unchanged)
+        let plain = sample_cell().encode().expect("encodes");
+        let find = |b: &[u8]| b.windows(12).any(|w| w == b"fringe_quads");
+        assert!(find(&bytes) && !find(&plain));
+        let mut count = c.clone();
+        count.header.fringe_quads = 2;
+        let e = count
+            .encode()
+            .expect_err("count of 2, one flag")
+            .to_string();
+        assert!(e.contains("fringe quads"), "{e}");
+        let mut order = c.clone();
+        order.header.quads.swap(0, 1);
+        let e = order.encode().expect_err("not the last").to_string();
+        assert!(e.contains("last"), "{e}");
+        // a damaged count: the header says 5 of 2
+        let mut header = c.header.clone();
+        header.fringe_quads = 5;
+        header.quads.clear();
+        let forged = container::encode(
+            CELL_MAGIC,
+            BUNDLE_VERSION,
+            &header,
+            &[
+                Blob {
+                    name: "near.bin".into(),
+                    data: bytemuck::cast_slice(&c.near).to_vec(),
+                },
+                Blob {
+                    name: "quads.bin".into(),
+                    data: encode_quads(&c.header.quads).expect("quads"),
+                },
+                Blob {
+                    name: "macro0.png".into(),
+                    data: c.macro_blobs[0].clone(),
+                },
+            ],
+        )
+        .expect("encodes");
+        let e = CellFile::decode(&forged).expect_err("5 of 2").to_string();
+        assert!(e.contains("5 fringe quads in a cell of 2 quads"), "{e}");
     }
 
     #[test]
@@ -1997,6 +2098,7 @@ mod tests {
             .map(|(&(f, layer, x0, y0, w, h), p)| {
                 let (fw, fh) = p.footprint(w as u32, h as u32);
                 Quad {
+                    fringe: false,
                     face: c.header.faces[f],
                     layer,
                     texels: [x0, y0, x0 + w, y0 + h],
@@ -2405,6 +2507,7 @@ mod tests {
         let corners = crate::compress::quad_corners(Face::PosX, 8.0, 64, rect)
             .map(|c| c.as_vec3().to_array());
         let q = Quad {
+            fringe: false,
             face: Face::PosX,
             layer: 0,
             texels: [8, 16, 12, 18],
@@ -2452,6 +2555,7 @@ mod tests {
         };
         let (fw, fh) = p.footprint(3, 5);
         let q = Quad {
+            fringe: false,
             face: Face::PosX,
             layer: 0,
             texels: [0, 0, 3, 5],

@@ -129,12 +129,6 @@ impl BakeParams {
                 ));
             }
         }
-        if p.outline_fringe && !p.texture_format.keeps_fringe() {
-            return Err(ParamsError::OutlineFringe(
-                "a texture format with a third alpha level (bc7, uastc or png): BC1's one-bit \
-                 alpha loses its mark",
-            ));
-        }
         Ok(())
     }
 }
@@ -257,14 +251,6 @@ mod tests {
                 BakeParams {
                     layering: Layering::Equidistant { overlap: 0.1 },
                     outline_fringe: true,
-                    ..ok()
-                },
-                "outline_fringe",
-            ),
-            (
-                BakeParams {
-                    outline_fringe: true,
-                    texture_format: crate::compress::TextureFormat::Bc1,
                     ..ok()
                 },
                 "outline_fringe",

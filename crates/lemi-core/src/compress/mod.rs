@@ -55,7 +55,7 @@ pub use micro_textures::{
     analyze_micro_textures, extract_micro_textures, quad_corners, MicroTexture,
     MicroTextureOptions, MicroTextureStats, TexelRect,
 };
-pub use outline_fringe::{is_fringe_alpha, mark_outline_fringe};
+pub use outline_fringe::{is_fringe_alpha, mark_outline_fringe, split_outline_fringe, FRINGE_GRID};
 
 use crate::face::Face;
 
@@ -109,6 +109,11 @@ pub struct CompressOptions {
     /// its point lies ([`gap_fill::copy_outlines`]; default `false`). Needs layers recorded with
     /// [`LayerImage::behind_plane`].
     pub outline_copies: bool,
+    /// After hidden-texel removal, take each layer's outline fringe texels into micro-textures
+    /// of their own ([`outline_fringe::split_outline_fringe`], a grid of [`FRINGE_GRID`]),
+    /// which follow all others in [`CompressedCell::micro_textures`] (default `false`): for
+    /// texture formats without the fringe's alpha level.
+    pub fringe_quads: bool,
     pub hidden: HiddenTexelOptions,
     pub micro: MicroTextureOptions,
     pub packing: PackingOptions,
@@ -120,6 +125,7 @@ impl Default for CompressOptions {
             gap_fill: true,
             gap_sources: GapSources::default(),
             outline_copies: false,
+            fringe_quads: false,
             hidden: HiddenTexelOptions::default(),
             micro: MicroTextureOptions::default(),
             packing: PackingOptions::default(),
@@ -141,8 +147,12 @@ pub struct CompressStats {
 /// A compressed view cell: the quads, the atlases and where each quad's texels are.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CompressedCell {
-    /// All micro-textures, ordered by face (input order), layer, then extraction order.
+    /// All micro-textures, ordered by face (input order), layer, then extraction order; then
+    /// the fringe micro-textures ([`CompressOptions::fringe_quads`]) in the same order.
     pub micro_textures: Vec<MicroTexture>,
+    /// How many micro-textures at the end of [`CompressedCell::micro_textures`] hold outline
+    /// fringe texels only (0 without [`CompressOptions::fringe_quads`]).
+    pub fringe_micro_textures: usize,
     pub macro_textures: Vec<MacroTexture>,
     /// One per micro-texture.
     pub placements: Vec<MacroPlacement>,
@@ -154,6 +164,8 @@ pub struct CompressedCell {
 pub struct CompressedFace {
     /// Ordered by layer, then extraction order.
     pub micro_textures: Vec<MicroTexture>,
+    /// The fringe micro-textures ([`CompressOptions::fringe_quads`]), in the same order.
+    pub fringe_micro_textures: Vec<MicroTexture>,
     /// The stages' statistics (without packing).
     pub stats: CompressStats,
 }
@@ -257,22 +269,42 @@ pub fn compress_face(
     }
     stats.gap_fill.add(&gaps);
     stats.hidden.add(&hidden);
-    // stage 3 per layer, in parallel, collected in order
+    // stage 3 per layer, in parallel, collected in order (the fringe texels first taken out
+    // into an image of their own where asked)
     let face = f.face;
-    let extracted: Vec<(Vec<MicroTexture>, MicroTextureStats)> = f
+    let fringe_micro = MicroTextureOptions {
+        cell_size: FRINGE_GRID,
+        ..options.micro
+    };
+    type Extracted = (Vec<MicroTexture>, MicroTextureStats, Vec<MicroTexture>);
+    let extracted: Vec<Extracted> = f
         .layers
-        .par_iter()
+        .par_iter_mut()
         .zip(f.distances.par_iter())
         .enumerate()
-        .map(|(k, (l, &d))| extract_micro_textures(l, face, k as u32, d, &options.micro))
-        .collect::<Result<_, _>>()?;
+        .map(|(k, (l, &d))| {
+            let fringe = match options.fringe_quads {
+                true => split_outline_fringe(l)?,
+                false => None,
+            };
+            let (m, s) = extract_micro_textures(l, face, k as u32, d, &options.micro)?;
+            let fm = match fringe {
+                Some(image) => extract_micro_textures(&image, face, k as u32, d, &fringe_micro)?.0,
+                None => Vec::new(),
+            };
+            Ok((m, s, fm))
+        })
+        .collect::<Result<_, CompressError>>()?;
     let mut micro_textures = Vec::new();
-    for (m, s) in extracted {
+    let mut fringe_micro_textures = Vec::new();
+    for (m, s, fm) in extracted {
         stats.micro.add(&s);
         micro_textures.extend(m);
+        fringe_micro_textures.extend(fm);
     }
     Ok(CompressedFace {
         micro_textures,
+        fringe_micro_textures,
         stats,
     })
 }
@@ -285,18 +317,23 @@ pub fn pack_cell(
 ) -> Result<CompressedCell, CompressError> {
     let mut stats = CompressStats::default();
     let mut micro_textures = Vec::new();
+    let mut fringe = Vec::new();
     for f in faces {
         stats.layer_bytes += f.stats.layer_bytes;
         stats.gap_fill.add(&f.stats.gap_fill);
         stats.hidden.add(&f.stats.hidden);
         stats.micro.add(&f.stats.micro);
         micro_textures.extend(f.micro_textures);
+        fringe.extend(f.fringe_micro_textures);
     }
+    let fringe_micro_textures = fringe.len();
+    micro_textures.extend(fringe);
     let (macro_textures, placements, packing) =
         pack_micro_textures(&micro_textures, &options.packing)?;
     stats.packing = packing;
     Ok(CompressedCell {
         micro_textures,
+        fringe_micro_textures,
         macro_textures,
         placements,
         stats,

@@ -22,8 +22,12 @@
 //! other texel) except hidden-texel removal, where it hides nothing (it may not be drawn). The
 //! runtime draws the fully opaque texels first and the fringe texels after them, each only on a
 //! pixel where something (near geometry or a quad) was drawn before; formats that cannot hold
-//! the third alpha level (BC1's one-bit alpha) lose the mark, and the fringe is drawn like any
-//! texel, as without this stage.
+//! the third alpha level (BC1's one-bit alpha, ETC1S) keep it another way: before micro-texture
+//! extraction [`split_outline_fringe`] takes the fringe texels out of their layer into an image
+//! of their own, fully opaque, whose micro-textures become *fringe quads* (the last
+//! [`crate::bundle::CellHeader::fringe_quads`] quads of the cell); the runtime draws those in the
+//! fringe pass only, and a reader that does not know them draws them as ordinary quads (today's
+//! image without this stage).
 
 use super::layer_image::{FRINGE_ALPHA, FULL_ALPHA};
 use super::{CompressError, LayerImage};
@@ -64,6 +68,46 @@ pub fn mark_outline_fringe(
     }
     const { assert!(FRINGE_ALPHA >= super::OPAQUE_ALPHA && FRINGE_ALPHA < FULL_ALPHA) };
     Ok(fringe.len() as u64)
+}
+
+/// Side in texels of the grid that cuts fringe images into micro-textures
+/// ([`split_outline_fringe`]): fringe texels lie along outlines, one texel wide, so the bake's
+/// grid of 8 would give quads of one texel in eight; 4 is the runtime's piece of the alpha-marked
+/// fringe and a BC1 block.
+pub const FRINGE_GRID: u32 = 4;
+
+/// Takes the fringe texels (alpha in [`super::OPAQUE_ALPHA`]..[`FULL_ALPHA`]) out of `layer`
+/// (they become transparent there) into an image of their own, where they are fully opaque
+/// ([`FULL_ALPHA`] or more: their alpha raised to 255) and everything else is transparent; its
+/// content rectangle is their bounding box. `None` when the layer has none. For formats that
+/// cannot hold the fringe level (see the module documentation).
+pub fn split_outline_fringe(layer: &mut LayerImage) -> Result<Option<LayerImage>, CompressError> {
+    layer.validate()?;
+    let res = layer.res;
+    let fringe: Vec<usize> = layer
+        .content_rows()
+        .flatten()
+        .filter(|&i| is_fringe_alpha(layer.rgba[4 * i + 3]))
+        .collect();
+    if fringe.is_empty() {
+        return Ok(None);
+    }
+    let mut image = LayerImage::new(res);
+    let mut bounds = super::TexelRect::empty();
+    for &i in &fringe {
+        let mut t = layer.texel(i);
+        t[3] = 255;
+        image.set_texel(i, t);
+        layer.clear_texel(i);
+        let (x, y) = ((i % res as usize) as u32, (i / res as usize) as u32);
+        bounds = bounds.union(&super::TexelRect {
+            x0: x,
+            y0: y,
+            x1: x + 1,
+            y1: y + 1,
+        });
+    }
+    Ok(Some(image.with_content(bounds)))
 }
 
 /// Whether an alpha value (0..=255) marks a fringe texel: opaque, below [`FULL_ALPHA`].
@@ -110,6 +154,39 @@ mod tests {
                 i == 7 || (i / 8 >= 1 && i / 8 < 7 && i % 8 >= 1 && i % 8 < 7)
             );
         }
+    }
+
+    #[test]
+    fn split_takes_the_fringe_texels_into_an_opaque_image_of_their_own() {
+        let (mut l, over) = layer();
+        mark_outline_fringe(&mut l, &over).expect("marks");
+        let before = l.clone();
+        let fringe = split_outline_fringe(&mut l)
+            .expect("valid layer")
+            .expect("fringe texels");
+        for i in 0..64 {
+            let t = before.texel(i);
+            if is_fringe_alpha(t[3]) {
+                assert_eq!(fringe.texel(i), [t[0], t[1], t[2], 255], "texel {i}");
+                assert!(!l.is_opaque(i), "texel {i} left in the layer");
+            } else {
+                assert_eq!(fringe.texel(i)[3], 0, "texel {i} in the fringe image");
+                assert_eq!(l.texel(i), t, "texel {i} changed");
+            }
+        }
+        // the bounding box of the ring
+        assert_eq!(
+            fringe.content,
+            crate::compress::TexelRect {
+                x0: 1,
+                y0: 1,
+                x1: 7,
+                y1: 7
+            }
+        );
+        // nothing left to split, and an unmarked layer has none
+        assert_eq!(split_outline_fringe(&mut l), Ok(None));
+        assert_eq!(split_outline_fringe(&mut layer().0), Ok(None));
     }
 
     #[test]

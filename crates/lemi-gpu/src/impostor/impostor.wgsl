@@ -194,6 +194,25 @@ fn fs_quad_fringe(in: QuadOut) -> QuadFragmentOut {
     if (t.a < globals.params.z || t.a >= globals.params.y) {
         discard;
     }
+    return fringe_output(in, t, dx, dy);
+}
+
+// The texels of a fringe quad (lemi_core::bundle::Quad::fringe: a format without the fringe's
+// alpha level keeps its fringe texels in quads of their own, fully opaque), drawn as
+// fs_quad_fringe draws the fringe texels of other quads.
+@fragment
+fn fs_quad_fringe_quads(in: QuadOut) -> QuadFragmentOut {
+    let dx = dpdx(in.uv);
+    let dy = dpdy(in.uv);
+    let t = texel_at(in, in.uv);
+    if (t.a < globals.params.z) {
+        discard;
+    }
+    return fringe_output(in, t, dx, dy);
+}
+
+// A fringe texel t: shown where it can close a gap (see fs_quad_fringe), discarded elsewhere.
+fn fringe_output(in: QuadOut, t: vec4<f32>, dx: vec2<f32>, dy: vec2<f32>) -> QuadFragmentOut {
     let p = vec2<i32>(in.clip.xy);
     var show = textureLoad(drawn_depth, p, 0) > 0.0;
     if (!show) {

@@ -76,6 +76,9 @@ pub(super) struct QuadDraw {
     /// The draw holds the pieces of quads around their outline fringe texels (alpha in
     /// [`QUAD_ALPHA_CUTOFF`], [`QUAD_FULL_ALPHA`]), drawn in the fringe pass only.
     pub(super) fringe: bool,
+    /// The draw holds fringe quads ([`Quad::fringe`]: every opaque texel is outline fringe,
+    /// whatever its alpha), drawn in the fringe pass only.
+    pub(super) fringe_quads: bool,
 }
 
 /// The quads of a cell on the CPU: shared vertex/index arrays, the draw calls in draw order and
@@ -188,7 +191,7 @@ pub(super) fn quad_geometry(
     let mut draws: Vec<QuadDraw> = Vec::new();
     let mut bounds: Vec<Bounds> = Vec::new();
     let mut run = None;
-    for &k in &order {
+    for &k in order.iter().filter(|&&k| !quads[k].fringe) {
         let q = &quads[k];
         let base = vertices.len() as u32;
         let [x, y, rw, rh] = q.rect;
@@ -204,6 +207,7 @@ pub(super) fn quad_geometry(
             index_count: 0,
             opaque: opaque[k],
             fringe: false,
+            fringe_quads: false,
         };
         let key = (q.face, opaque[k], at.page, band[k]);
         let (d, b) = draw_of(
@@ -227,10 +231,11 @@ pub(super) fn quad_geometry(
         indices.extend([0, 1, 2, 0, 2, 3].map(|i| base + i));
         d.index_count += 6;
     }
-    // the outline fringe: per quad that has fringe texels, pieces of it around them only (runs
-    // of FRINGE_BLOCK² texel blocks), drawn in the fringe pass alone
+    // the outline fringe, drawn in the fringe pass alone: per quad that has fringe texels,
+    // pieces of it around them only (runs of FRINGE_BLOCK² texel blocks), and the fringe quads
+    // whole
     let mut run = None;
-    for &k in order.iter().filter(|&&k| fringe[k]) {
+    for &k in order.iter().filter(|&&k| fringe[k] || quads[k].fringe) {
         let q = &quads[k];
         let (Some(at), Some(m)) = (place(q), macros.get(q.macro_index as usize)) else {
             continue;
@@ -243,8 +248,9 @@ pub(super) fn quad_geometry(
             index_count: 0,
             opaque: false,
             fringe: true,
+            fringe_quads: q.fringe,
         };
-        let key = (q.face, at.page, band[k]);
+        let key = (q.face, at.page, band[k], q.fringe);
         let (d, b) = draw_of(
             &mut draws,
             &mut bounds,
@@ -254,9 +260,18 @@ pub(super) fn quad_geometry(
             scales[k],
             seen_from,
         );
-        for piece in fringe_pieces(m, q.rect) {
+        let pieces = match q.fringe {
+            true => Vec::new(),
+            false => fringe_pieces(m, q.rect),
+        };
+        let whole = q.fringe.then(|| q.drawn_vertices());
+        for corners in pieces
+            .into_iter()
+            .map(|p| piece_vertices(q, p))
+            .chain(whole)
+        {
             let base = vertices.len() as u32;
-            for (position, uv) in piece_vertices(q, piece) {
+            for (position, uv) in corners {
                 b.add(glam::Vec3::from_array(position).as_dvec3());
                 vertices.push(QuadVertex {
                     position,
@@ -275,7 +290,9 @@ pub(super) fn quad_geometry(
         draws,
         atlas,
         bounds,
-        opaque_quads: opaque.iter().filter(|&&o| o).count(),
+        opaque_quads: (opaque.iter().zip(quads))
+            .filter(|(&o, q)| o && !q.fringe)
+            .count(),
     })
 }
 
@@ -678,6 +695,7 @@ mod tests {
 
     fn quad(macro_index: u32, layer: u16, rect: [u32; 4]) -> Quad {
         Quad {
+            fringe: false,
             face: Face::NegZ,
             layer,
             texels: [0, 0, rect[2] as u16, rect[3] as u16],
@@ -744,6 +762,7 @@ mod tests {
             index_count: 6 * quads,
             opaque,
             fringe,
+            fringe_quads: false,
         };
         // one face: the opaque quads 1 (layer 5), 0 (layer 1, macro 0) and 5 (layer 1, macro 1)
         // in one draw, then the alpha-tested quads 2 (layer 3), 4 and 3 (layer 1) in another,
@@ -797,6 +816,7 @@ mod tests {
             [-s(x), -s(y), -100.0]
         };
         Quad {
+            fringe: false,
             face: Face::NegZ,
             layer: 0,
             texels: rect,

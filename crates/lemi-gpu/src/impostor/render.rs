@@ -108,6 +108,8 @@ struct QuadPipelines {
     /// The outline fringe texels of quads that have them (`fs_quad_fringe`), in a pass after all
     /// others that samples the depth buffer those left.
     fringe: wgpu::RenderPipeline,
+    /// Fringe quads (`fs_quad_fringe_quads`) in the same pass.
+    fringe_quads: wgpu::RenderPipeline,
 }
 
 impl ImpostorRenderer {
@@ -181,7 +183,7 @@ impl ImpostorRenderer {
             };
             let quad_pipeline_for =
                 |label: &str, entry_point: &str, footprint: bool, view_depth| {
-                    let fringe = entry_point == "fs_quad_fringe";
+                    let fringe = entry_point.starts_with("fs_quad_fringe");
                     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                         label: Some(label),
                         layout: Some(if fringe { &fringe_layout } else { &quad_layout }),
@@ -224,6 +226,12 @@ impl ImpostorRenderer {
                     fringe: quad_pipeline_for(
                         "lemi impostor renderer: outline fringe",
                         "fs_quad_fringe",
+                        footprint,
+                        view_depth,
+                    ),
+                    fringe_quads: quad_pipeline_for(
+                        "lemi impostor renderer: fringe quads",
+                        "fs_quad_fringe_quads",
                         footprint,
                         view_depth,
                     ),
@@ -584,17 +592,20 @@ impl ImpostorRenderer {
                         let filter =
                             footprint && !seen.is_some_and(|(e, a)| b.texels_magnified(e, a));
                         nearest_draws += u32::from(footprint && !filter);
-                        if pipeline != Some((filter, d.opaque)) {
+                        let kind = (filter, d.opaque, d.fringe_quads);
+                        if pipeline != Some(kind) {
                             let pipelines =
                                 &self.quad_pipelines[usize::from(readback)][usize::from(filter)];
-                            pass.set_pipeline(if fringe {
+                            pass.set_pipeline(if d.fringe_quads {
+                                &pipelines.fringe_quads
+                            } else if fringe {
                                 &pipelines.fringe
                             } else if d.opaque {
                                 &pipelines.opaque
                             } else {
                                 &pipelines.alpha_tested
                             });
-                            pipeline = Some((filter, d.opaque));
+                            pipeline = Some(kind);
                         }
                         quad_draws += 1;
                         if bound != Some(d.page) {

@@ -17,6 +17,7 @@ pub(crate) fn gpu() -> Option<Gpu> {
 /// A quad facing a camera at the origin looking along −Z, at depth `z`.
 pub(crate) fn quad(macro_index: u32, rect: [u32; 4], [x0, x1, y0, y1, z]: [f32; 5]) -> Quad {
     Quad {
+        fringe: false,
         face: Face::NegZ,
         layer: 0,
         texels: [0, 0, rect[2] as u16, rect[3] as u16],

@@ -208,6 +208,7 @@ pub(super) fn macro_textures(
             }
         }
         quads.push(Quad {
+            fringe: false,
             face: Face::PosZ,
             // far to near, so the renderer draws near billboards first
             layer: (u16::MAX as f64 - imp.distance.min(u16::MAX as f64)) as u16,
