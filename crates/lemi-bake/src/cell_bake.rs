@@ -316,6 +316,7 @@ impl<'a> Baker<'a> {
             opaque_texels_after_gap_fill: s.hidden.opaque_before,
             outline_copies: s.gap_fill.outline_copies,
             outline_fringe,
+            fringe_quads: compressed.fringe_micro_textures as u64,
             opaque_texels_after_hidden_removal: s.hidden.opaque_after,
             micro_textures: s.micro.micro_textures,
             micro_fill_ratio: s.micro.fill_ratio,

@@ -36,6 +36,8 @@ pub struct CellReport {
     pub outline_copies: u64,
     /// Recorded texels marked as outline fringe (`BakeParams::outline_fringe`).
     pub outline_fringe: u64,
+    /// Quads holding the outline fringe of a format without its alpha level (BC1, ETC1S).
+    pub fringe_quads: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,
@@ -63,6 +65,7 @@ impl CellReport {
             opaque_texels_recorded: s.opaque_texels_recorded,
             outline_copies: s.outline_copies,
             outline_fringe: s.outline_fringe,
+            fringe_quads: s.fringe_quads,
             opaque_texels_after_hidden_removal: s.opaque_texels_after_hidden_removal,
             micro_textures: s.micro_textures,
             micro_fill_ratio: s.micro_fill_ratio,
@@ -122,6 +125,7 @@ fn add(total: &mut CellStats, s: &CellStats) {
     total.opaque_texels_after_gap_fill += s.opaque_texels_after_gap_fill;
     total.outline_copies += s.outline_copies;
     total.outline_fringe += s.outline_fringe;
+    total.fringe_quads += s.fringe_quads;
     total.opaque_texels_after_hidden_removal += s.opaque_texels_after_hidden_removal;
     total.micro_textures += s.micro_textures;
     total.macro_textures += s.macro_textures;

@@ -628,6 +628,7 @@ pub fn run(args: Args) -> Result<()> {
             "macro_textures": total.macro_textures,
             "outline_copies": total.outline_copies,
             "outline_fringe": total.outline_fringe,
+            "fringe_quads": total.fringe_quads,
             "stage_seconds": total.seconds.iter().cloned().collect::<std::collections::BTreeMap<String, f64>>(),
             "warnings": warnings,
             "per_cell": per_cell,
@@ -686,6 +687,14 @@ pub fn run(args: Args) -> Result<()> {
             total.outline_fringe as f64 / n,
             100.0 * total.outline_fringe as f64 / total.opaque_texels_recorded.max(1) as f64
         );
+        if total.fringe_quads > 0 {
+            println!(
+                "           per cell: {:.0} fringe quads ({}'s one-bit alpha cannot mark the fringe: it \
+                 is kept in quads of its own)",
+                total.fringe_quads as f64 / n,
+                params.texture_format.name()
+            );
+        }
     }
     if !matches!(params.layering, Layering::Hlod { .. }) {
         println!(

@@ -349,6 +349,10 @@ pub struct CellStats {
     /// `opaque_texels_recorded`, absent when none).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub outline_fringe: u64,
+    /// Fringe quads among the cell's quads ([`CellHeader::fringe_quads`], formats without the
+    /// fringe's alpha level; absent when none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub fringe_quads: u64,
     pub opaque_texels_after_hidden_removal: u64,
     pub micro_textures: u64,
     pub micro_fill_ratio: f64,

@@ -808,6 +808,38 @@ mod tests {
         assert_eq!(i[6..12], [4, 5, 6, 4, 6, 7]);
     }
 
+    /// Fringe quads (BC1's outline fringe, fully opaque texels) are drawn whole in the fringe
+    /// pass with their own pipeline, never in the first pass, and do not count as opaque.
+    #[test]
+    fn fringe_quads_are_drawn_whole_in_the_fringe_pass_only() {
+        let macros = [opaque_macro(8, 8)];
+        let mut fringe = quad(0, 2, [4, 4, 4, 2]);
+        fringe.fringe = true;
+        let quads = [quad(0, 1, [0, 0, 4, 4]), fringe];
+        let g = quad_geometry(&quads, &macros, 64, None).expect("valid quads");
+        assert_eq!(g.opaque_quads, 1);
+        let d = |first_index, opaque, fringe, fringe_quads| QuadDraw {
+            page: 0,
+            first_index,
+            index_count: 6,
+            opaque,
+            fringe,
+            fringe_quads,
+        };
+        assert_eq!(
+            g.draws,
+            vec![d(0, true, false, false), d(6, false, true, true)]
+        );
+        // the fringe quad as any quad is drawn: its grown corners and texture coordinates
+        for (c, (position, uv)) in fringe.drawn_vertices().into_iter().enumerate() {
+            assert_eq!(
+                (g.vertices[4 + c].position, g.vertices[4 + c].uv),
+                (position, uv)
+            );
+            assert_eq!(g.vertices[4 + c].rect, [4.0, 4.0, 8.0, 6.0]);
+        }
+    }
+
     /// A quad of the `−Z` face layer at distance 100 around the origin, texels `rect` (x0, y0,
     /// x1, y1) of a 64² face image.
     fn face_quad(macro_index: u32, rect: [u16; 4]) -> Quad {
