@@ -36,6 +36,13 @@ pub struct Args {
     /// Layers per face.
     #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub layers: u32,
+    /// Bake without the outline fringe (docs/COMPRESSION.md, "1c. Outline fringe"), which the
+    /// demo uses by default at the matched resolution or above (it is made for texels of at
+    /// most an output pixel): silhouettes where the geometry's are (on its 312 certificate views
+    /// false coverage 0.062 % → 0.027 %, silhouette p99 1.42 → 1.00 px) for a frame 4–12 %
+    /// dearer.
+    #[arg(long)]
+    pub no_outline_fringe: bool,
     /// GPU backend: auto, vulkan or gl.
     #[arg(long, default_value = "auto")]
     pub backend: String,
@@ -57,11 +64,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     // layers as sharp as the output view: a texel subtends at most one output pixel
-    let resolution = match args.resolution {
-        Some(r) => r,
-        None => lemi_core::placement::min_face_res_for_output_view(OUT_FOV_X.to_radians(), OUT_W)
-            .context("the resolution matching the demo's output view")?,
-    };
+    let matched = lemi_core::placement::min_face_res_for_output_view(OUT_FOV_X.to_radians(), OUT_W)
+        .context("the resolution matching the demo's output view")?;
+    let resolution = args.resolution.unwrap_or(matched);
+    // the fringe pass closes gaps of up to two pixels: made for texels of at most a pixel
+    let outline_fringe = !args.no_outline_fringe && resolution >= matched;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating the output directory {}", args.out.display()))?;
     let bundle = args.out.join("bundle");
@@ -108,7 +115,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         backend: args.backend.clone(),
         json: false,
         texture_format: None,
-        outline_fringe: false,
+        outline_fringe,
     })?;
 
     // From the corner of the first cell, looking down the avenue.
