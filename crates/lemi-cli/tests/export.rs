@@ -57,6 +57,8 @@ struct ReadQuad {
     positions: [[f64; 3]; 4],
     texels: [[f32; 2]; 4],
     rect: [[u32; 2]; 4],
+    /// In a primitive marked `extras.lemi_fringe`.
+    fringe: bool,
 }
 
 /// Every quad of a `.glb` in file order, its images decoded to RGBA8 (in image order), and the
@@ -190,6 +192,10 @@ fn read_glb(path: &Path) -> ReadBack {
     let origin: [f64; 3] =
         std::array::from_fn(|i| node["translation"][i].as_f64().expect("a translation"));
     for prim in primitives {
+        let fringe = match &prim["extras"]["lemi_fringe"] {
+            serde_json::Value::Null => false,
+            v => v.as_bool().expect("lemi_fringe is true or absent"),
+        };
         let material = &json["materials"][prim["material"].as_u64().unwrap() as usize];
         assert!(
             material["extensions"]["KHR_materials_unlit"].is_object(),
@@ -249,6 +255,7 @@ fn read_glb(path: &Path) -> ReadBack {
                 positions,
                 texels,
                 rect,
+                fringe,
             });
         }
     }
@@ -284,6 +291,7 @@ fn assert_round_trip(bundle: &Path, out: &Path) {
             );
             assert_eq!(read.texels, drawn.map(|v| v.1), "cell {id}: quad {k}");
             assert_eq!(read.rect, q.macro_texel_corners(), "cell {id}: quad {k}");
+            assert_eq!(read.fringe, q.fringe, "cell {id}: quad {k}");
             let tolerance = lemi_export::cell_gltf::POSITION_TOLERANCE_TEXELS * q.texel_size();
             // the bundle's corners, grown by 1/16 texel along the quad's edges
             let (w, h) = (
@@ -315,10 +323,13 @@ fn assert_round_trip(bundle: &Path, out: &Path) {
             }
         }
         eprintln!("cell {id}: vertices within {worst:.3} of their tolerance");
-        // one primitive per macro-texture and kind
-        let mut kinds: Vec<(u32, bool)> = order
+        // one primitive per macro-texture and kind (fringe quads a kind of their own)
+        let mut kinds: Vec<(u32, bool, bool)> = order
             .iter()
-            .map(|&k| (file.header.quads[k].macro_index, opaque[k]))
+            .map(|&k| {
+                let q = &file.header.quads[k];
+                (q.macro_index, q.fringe, opaque[k])
+            })
             .collect();
         kinds.dedup();
         assert_eq!(back.primitives, kinds.len(), "cell {id}");
@@ -334,9 +345,25 @@ fn assert_round_trip(bundle: &Path, out: &Path) {
 #[test]
 fn exported_quads_and_texels_are_the_bundles() {
     let d = tmp("export", "round-trip");
-    for format in ["png", "bc7"] {
+    // BC1 with the outline fringe: its fringe quads are primitives of their own
+    for (format, extra) in [
+        ("png", None),
+        ("bc7", None),
+        ("bc1", Some("--outline-fringe")),
+    ] {
         let bundle = d.join(format);
-        bake(&bundle, &["--texture-format", format]);
+        let mut args = vec!["--texture-format", format];
+        args.extend(extra);
+        bake(&bundle, &args);
+        let opened = Bundle::open(&bundle).unwrap();
+        let fringe_quads: u64 = (opened.cell_ids().into_iter())
+            .map(|id| opened.cell(id).unwrap().header.fringe_quads)
+            .sum();
+        assert_eq!(
+            fringe_quads > 0,
+            extra.is_some(),
+            "{format}: {fringe_quads}"
+        );
         let out = d.join(format!("{format}-gltf"));
         let o = export(&bundle, &out, &["--json"]);
         assert!(o.status.success(), "{format}: {}", stderr(&o));
@@ -625,7 +652,8 @@ fn every_exported_cell_passes_the_khronos_validator() {
     let Some(web) = node_tools() else { return };
     let d = tmp("export", "validator");
     let bundle = d.join("b");
-    bake(&bundle, &[]);
+    // BC1 (the default) with the outline fringe: its fringe quads' primitives carry `extras`
+    bake(&bundle, &["--outline-fringe"]);
     let out = d.join("gltf");
     let o = export(&bundle, &out, &["--with-near"]);
     assert!(o.status.success(), "{}", stderr(&o));

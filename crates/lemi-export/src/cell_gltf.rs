@@ -22,6 +22,13 @@
 //!   `t / side`, exactly; with [`ExportGeometry::Plain`] (or a macro-texture side above
 //!   [`MAX_QUANTIZED_SIDE`]) as f32 `t / side`. A reader rounds `t` to get the quad's texel
 //!   rectangle back.
+//! - **Fringe quads** (a BC1 or ETC1S bundle baked with `--outline-fringe`,
+//!   [`lemi_core::bundle::CellHeader::fringe_quads`]): primitives of their own, after the other
+//!   primitives of their macro-texture, with `extras` `{"lemi_fringe": true}`. Their texels are
+//!   the outline fringe, which lemi's runtime draws only where something lies behind them (or in
+//!   a gap of up to two pixels); a renderer that draws them as ordinary quads shows the
+//!   silhouettes a texel wider, as a bake without the fringe does, and one that skips them may
+//!   show background between outlines (docs/COMPRESSION.md, "1c. Outline fringe").
 //! - **Geometry**: with [`ExportGeometry::Meshopt`] every vertex and index view is compressed
 //!   with `EXT_meshopt_compression` (see `document.rs`), losslessly but for the quads' filtered
 //!   positions.
@@ -124,7 +131,7 @@ pub fn opaque_quads(file: &CellFile) -> Result<Vec<bool>, ExportError> {
 }
 
 /// The order the quads are written in: one primitive per macro-texture and kind (opaque quads
-/// before alpha-tested ones), within it by face, then the nearest layer first (a quad's `layer`
+/// before alpha-tested ones, fringe quads last), within it by face, then the nearest layer first (a quad's `layer`
 /// counts far to near), ties in the cell's order: the runtime's order within a draw call
 /// (`lemi_gpu::impostor`), so depth rejection skips what nearer layers hide.
 pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
@@ -132,6 +139,7 @@ pub fn quad_order(quads: &[Quad], opaque: &[bool]) -> Vec<usize> {
     order.sort_by_key(|&k| {
         (
             quads[k].macro_index,
+            quads[k].fringe,
             !opaque.get(k).copied().unwrap_or(false),
             quads[k].face,
             std::cmp::Reverse(quads[k].layer),
@@ -259,10 +267,13 @@ pub fn export_cell(
     while start < order.len() {
         let m = quads[order[start]].macro_index;
         let kind = opaque[order[start]];
+        let fringe = quads[order[start]].fringe;
         let end = start
             + order[start..]
                 .iter()
-                .take_while(|&&k| quads[k].macro_index == m && opaque[k] == kind)
+                .take_while(|&&k| {
+                    quads[k].macro_index == m && opaque[k] == kind && quads[k].fringe == fringe
+                })
                 .count();
         let info = header.macros.get(m as usize).ok_or_else(|| {
             ExportError::Gltf(format!("a quad uses macro-texture {m}, the cell has fewer"))
@@ -304,14 +315,18 @@ pub fn export_cell(
         let material = materials
             .get(m as usize)
             .map(|pair| pair[usize::from(!kind)]);
-        primitives.push(primitive(
+        let mut quads_primitive = primitive(
             [
                 (json::mesh::Semantic::Positions, position),
                 (json::mesh::Semantic::TexCoords(0), uv),
             ],
             index,
             material,
-        ));
+        );
+        if fringe {
+            quads_primitive.extras = extras(&json!({ "lemi_fringe": true }))?;
+        }
+        primitives.push(quads_primitive);
         start = end;
     }
     let quad_bytes = doc.geometry_bytes;
@@ -404,6 +419,7 @@ pub fn export_cell(
             "layer_count": header.layers.iter().map(|l| l.len()).collect::<Vec<_>>(),
             "layers": header.layers.iter().map(|face| layer_table(face)).collect::<Vec<_>>(),
             "quads": quads.len(),
+            "fringe_quads": header.fringe_quads,
             "macro_textures": header.macros.len(),
             "near_triangles": near_triangles,
             "alpha_cutoff": QUAD_ALPHA_CUTOFF,
