@@ -434,7 +434,7 @@ pub struct CellHeader {
     /// of a texture format without its alpha level (`BakeParams::outline_fringe` with BC1 or
     /// ETC1S, [`crate::compress::split_outline_fringe`]), drawn only where something lies behind
     /// them. Absent (0) in the file otherwise; a reader that ignores it draws them as ordinary
-    /// quads, as the glTF export does.
+    /// quads (the glTF export marks them `extras.lemi_fringe`).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub fringe_quads: u64,
 }

@@ -330,8 +330,9 @@ fn draw_of<'a, K: PartialEq>(
     (&mut draws[n], b)
 }
 
-/// Side in texels of the blocks the fringe pass draws around outline fringe texels.
-const FRINGE_BLOCK: u32 = 4;
+/// Side in texels of the blocks the fringe pass draws around outline fringe texels: the grid
+/// the bake cuts fringe quads on, so both forms of the fringe are drawn in the same pieces.
+const FRINGE_BLOCK: u32 = lemi_core::compress::FRINGE_GRID;
 
 /// The pieces of `rect` (`[x, y, w, h]` in `m`) the fringe pass draws: every [`FRINGE_BLOCK`]²
 /// block (clipped to the rectangle) that holds an outline fringe texel, runs of them along a
